@@ -1,0 +1,45 @@
+//! The crate's error type.
+
+use std::path::PathBuf;
+
+/// Errors of the `assess` crate. Messages are lowercase and name the offending key or file.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum AssessError {
+    /// A configuration or calibration value breaks a rule of the model.
+    #[error("invalid value for `{key}`: {rule}")]
+    InvalidValue {
+        /// The TOML key, dotted (`switching.cost_high`, `area[2].size_m`).
+        key: String,
+        /// The rule it breaks, with the offending value.
+        rule: String,
+    },
+    /// A TOML document could not be parsed (syntax, unknown key, wrong type).
+    #[error("{}: {message}", origin.display())]
+    Parse {
+        /// The file (or `<string>` for in-memory documents).
+        origin: PathBuf,
+        /// The parser's message, including line and column and, for unknown keys, the key.
+        message: String,
+    },
+    /// A file could not be read.
+    #[error("cannot read {}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+}
+
+/// Result alias of this crate.
+pub type Result<T, E = AssessError> = std::result::Result<T, E>;
+
+impl AssessError {
+    pub(crate) fn invalid(key: impl Into<String>, rule: impl Into<String>) -> Self {
+        Self::InvalidValue {
+            key: key.into(),
+            rule: rule.into(),
+        }
+    }
+}

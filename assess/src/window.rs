@@ -1,0 +1,159 @@
+//! §8 windowed sums: a ring of per-frame contributions over the horizon H, with running totals.
+//!
+//! Times are integer nanoseconds, so adding a frame and later removing it leaves the totals
+//! exactly as they were (no floating-point drift over long trials).
+
+/// One frame's contributions to the integrals.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct FrameContribution {
+    /// Frame time [s].
+    pub(crate) t: f64,
+    /// Δt_k [ns].
+    pub(crate) dt_ns: i64,
+    /// v_F.
+    pub(crate) valid: bool,
+    /// Confirmed state code (area index, or N for ∅).
+    pub(crate) state: u16,
+    /// v_AB.
+    pub(crate) ab_valid: bool,
+    /// I_AB.
+    pub(crate) ab_inconsistent: bool,
+    /// C(t).
+    pub(crate) collaborating: bool,
+    /// H(t) (possibly set later, retroactively).
+    pub(crate) hesitating: bool,
+    /// Cost of the switch event on this frame (0 if none).
+    pub(crate) switch_cost: f64,
+}
+
+/// Integrals over a set of frames [ns], shared by the cumulative and the windowed indicators.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Totals {
+    /// T_i per area [ns].
+    pub(crate) area_ns: Vec<i64>,
+    /// T_v [ns].
+    pub(crate) valid_ns: i64,
+    /// ∫ v_AB [ns].
+    pub(crate) ab_valid_ns: i64,
+    /// ∫ I_AB [ns].
+    pub(crate) ab_inconsistent_ns: i64,
+    /// T_collab [ns].
+    pub(crate) collab_ns: i64,
+    /// T_hes [ns].
+    pub(crate) hes_ns: i64,
+    /// Σ switch costs.
+    pub(crate) switch_cost: f64,
+}
+
+impl Totals {
+    pub(crate) fn new(n_areas: usize) -> Self {
+        Self {
+            area_ns: vec![0; n_areas],
+            ..Self::default()
+        }
+    }
+
+    /// Add (`sign` = 1) or remove (`sign` = −1) one frame's contributions.
+    pub(crate) fn apply(&mut self, f: &FrameContribution, sign: i64) {
+        let dt = sign * f.dt_ns;
+        if f.valid {
+            self.valid_ns += dt;
+            if let Some(a) = self.area_ns.get_mut(f.state as usize) {
+                *a += dt;
+            }
+        }
+        if f.ab_valid {
+            self.ab_valid_ns += dt;
+            if f.ab_inconsistent {
+                self.ab_inconsistent_ns += dt;
+            }
+        }
+        if f.collaborating {
+            self.collab_ns += dt;
+        }
+        if f.hesitating {
+            self.hes_ns += dt;
+        }
+        self.switch_cost += sign as f64 * f.switch_cost;
+    }
+}
+
+/// The frames with t_now − t_k < H, and their totals.
+#[derive(Debug, Clone)]
+pub(crate) struct Window {
+    ring: Vec<FrameContribution>,
+    /// Sequence number of the oldest frame in the ring.
+    oldest_seq: u64,
+    len: usize,
+    horizon_s: f64,
+    pub(crate) totals: Totals,
+    /// Number of switch events in the window (to reset the cost sum to exactly 0 when none).
+    switches: u64,
+    pub(crate) overflowed: bool,
+}
+
+impl Window {
+    pub(crate) fn new(n_areas: usize, horizon_s: f64, max_rate_hz: f64) -> Self {
+        let cap = (horizon_s * max_rate_hz).ceil() as usize + 2;
+        Self {
+            ring: vec![FrameContribution::default(); cap],
+            oldest_seq: 0,
+            len: 0,
+            horizon_s,
+            totals: Totals::new(n_areas),
+            switches: 0,
+            overflowed: false,
+        }
+    }
+
+    fn slot(&self, seq: u64) -> usize {
+        (seq % self.ring.len() as u64) as usize
+    }
+
+    fn evict_oldest(&mut self) {
+        let i = self.slot(self.oldest_seq);
+        let old = self.ring[i];
+        self.totals.apply(&old, -1);
+        if old.switch_cost != 0.0 {
+            self.switches -= 1;
+            if self.switches == 0 {
+                self.totals.switch_cost = 0.0;
+            }
+        }
+        self.oldest_seq += 1;
+        self.len -= 1;
+    }
+
+    /// Drop the frames that left the window at time `t_now`, then add frame number `seq`.
+    pub(crate) fn push(&mut self, seq: u64, f: FrameContribution) {
+        while self.len > 0 && f.t - self.ring[self.slot(self.oldest_seq)].t >= self.horizon_s {
+            self.evict_oldest();
+        }
+        if self.len == self.ring.len() {
+            self.evict_oldest();
+            self.overflowed = true;
+        }
+        if self.len == 0 {
+            self.oldest_seq = seq;
+        }
+        let i = self.slot(seq);
+        self.ring[i] = f;
+        self.len += 1;
+        self.totals.apply(&f, 1);
+        if f.switch_cost != 0.0 {
+            self.switches += 1;
+        }
+    }
+
+    /// Mark frames `from_seq..=to_seq` (those still in the window) as hesitation.
+    pub(crate) fn mark_hesitation(&mut self, from_seq: u64, to_seq: u64) {
+        for seq in from_seq.max(self.oldest_seq)..=to_seq {
+            let i = self.slot(seq);
+            let f = &mut self.ring[i];
+            if !f.hesitating {
+                f.hesitating = true;
+                self.totals.hes_ns += f.dt_ns;
+            }
+        }
+    }
+}
