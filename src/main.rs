@@ -1,1 +1,40 @@
-fn main() {}
+//! `hrc-adapt`: the command-line front of the workspace. Thin: each subcommand lives in its own
+//! module and calls into the library crates.
+
+mod assess_cmd;
+mod robot_cmd;
+
+use clap::{Parser, Subcommand};
+
+/// Adapts a UR5e cobot to its human operator from vision-based cognitive-workload assessment.
+#[derive(Debug, Parser)]
+#[command(name = "hrc-adapt", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Assess a recording offline: cues → indicators.csv and plots.
+    Assess(assess_cmd::AssessArgs),
+    /// Record a live UR controller (or the emulator) over RTDE into a CSV trace.
+    Record(robot_cmd::RecordArgs),
+    /// Serve a UR controller emulator (RTDE, dashboard, script ports) on loopback.
+    Emulate(robot_cmd::EmulateArgs),
+}
+
+fn main() -> anyhow::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Assess(args) => assess_cmd::run(args),
+        Command::Record(args) => robot_cmd::record(args),
+        Command::Emulate(args) => robot_cmd::emulate(args),
+    }
+}

@@ -60,6 +60,7 @@ mod cue;
 mod error;
 pub mod evidence;
 pub mod filter;
+pub mod io;
 
 pub use area::{Area, AreaBox, AreaId, AreaRole, Workspace};
 pub use assessment::{Assessment, Category, Dominant, Indicator, Indicators};

@@ -1,6 +1,16 @@
 //! # robot-io: the wire to the UR5e
 //!
-//! **Skeleton.** Issue 3 fills this crate: the RTDE codec and tokio client, the UR controller
-//! emulator, the `Robot` trait with `RtdeRobot`, `SimRobot` and `ReplayRobot`, dashboard and
-//! script senders, and trace readers and writers.
+//! **In progress (issue 3).** This crate will hold the RTDE codec and tokio client, the UR
+//! controller emulator, the [`Robot`] trait with `RtdeRobot`, `SimRobot` and `ReplayRobot`,
+//! dashboard and script senders, and trace readers and writers. It depends on no other crate of
+//! the project.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::indexing_slicing))]
+
+mod error;
+mod types;
+
+pub use error::{Result, RobotIoError};
+pub use types::{
+    robot_mode, runtime_state, safety_mode, safety_status_bits, JointCommand, Joints, Robot,
+    RobotState,
+};

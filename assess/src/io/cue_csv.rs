@@ -1,0 +1,1 @@
+//! The cue CSV format (see the README).

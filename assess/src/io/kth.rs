@@ -1,0 +1,1 @@
+//! The KTH handover dataset layout (OptiTrack rigid bodies at 120 Hz) → CueFrames for the taker.
