@@ -12,6 +12,9 @@ pub enum RobotIoError {
         /// The underlying error.
         source: std::io::Error,
     },
+    // --- RTDE side (codec, client, emulator, dashboard, script) ---
+
+    // --- simulation and traces ---
 }
 
 /// Result alias of this crate.

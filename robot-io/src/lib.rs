@@ -9,6 +9,19 @@
 mod error;
 mod types;
 
+// --- RTDE side: codec, client, RtdeRobot, emulator, dashboard, script ---
+pub mod client;
+pub mod codec;
+pub mod dashboard;
+pub mod emulator;
+pub mod rtde_robot;
+pub mod script;
+
+// --- simulation and traces: SimRobot, ReplayRobot, trace readers/writers ---
+pub mod replay;
+pub mod sim;
+pub mod trace;
+
 pub use error::{Result, RobotIoError};
 pub use types::{
     robot_mode, runtime_state, safety_mode, safety_status_bits, JointCommand, Joints, Robot,

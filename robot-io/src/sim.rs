@@ -1,0 +1,1 @@
+//! (issue 3: simulation and traces; being written)
