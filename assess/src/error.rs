@@ -30,6 +30,27 @@ pub enum AssessError {
         /// The underlying error.
         source: std::io::Error,
     },
+    /// A data file (a cue CSV) is malformed at a known place.
+    #[error("{}:{line}:{column}: {message}", path.display())]
+    Csv {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line of the offending record.
+        line: u64,
+        /// 1-based column (field index) of the offending cell; the first column when the whole
+        /// record is at fault.
+        column: usize,
+        /// What is wrong, naming the column and quoting the cell.
+        message: String,
+    },
+    /// A file could not be written.
+    #[error("cannot write {}: {source}", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
 }
 
 /// Result alias of this crate.
