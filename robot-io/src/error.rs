@@ -13,8 +13,184 @@ pub enum RobotIoError {
         source: std::io::Error,
     },
     // --- RTDE side (codec, client, emulator, dashboard, script) ---
+    /// A package or field was cut short.
+    #[error("truncated {what}: need {needed} bytes, have {available}")]
+    Truncated {
+        /// What was being decoded.
+        what: &'static str,
+        /// Bytes needed [B].
+        needed: usize,
+        /// Bytes available [B].
+        available: usize,
+    },
+    /// A package violates the RTDE wire format.
+    #[error("malformed rtde package: {reason}")]
+    Malformed {
+        /// What is wrong.
+        reason: &'static str,
+    },
+    /// An RTDE package type this side does not accept.
+    #[error("unexpected rtde package type {kind:#04x}")]
+    UnexpectedPackage {
+        /// The package type byte.
+        kind: u8,
+    },
+    /// A type string that is not one of RTDE's field types.
+    #[error("unknown rtde field type `{name}`")]
+    UnknownFieldType {
+        /// The type string as received.
+        name: String,
+    },
+    /// A value does not match its recipe field's type, or a field is not in the recipe.
+    #[error("recipe field mismatch: {reason}")]
+    RecipeMismatch {
+        /// What does not match.
+        reason: String,
+    },
+    /// The controller does not know these fields (it answered NOT_FOUND).
+    #[error("the controller does not know these rtde fields: {}", fields.join(", "))]
+    FieldsNotFound {
+        /// The unknown field names.
+        fields: Vec<String>,
+    },
+    /// Another writer (fieldbus adapter, URCap or another RTDE client) owns these inputs.
+    #[error("rtde inputs already in use by another writer: {} (use registers 24 and up)", fields.join(", "))]
+    InputsInUse {
+        /// The input names already claimed.
+        fields: Vec<String>,
+    },
+    /// The TCP connection was refused: nothing listens there.
+    #[error("connection refused by {addr} (is the controller or emulator running?)")]
+    ConnectionRefused {
+        /// The address tried.
+        addr: String,
+    },
+    /// The controller refused the requested RTDE protocol version.
+    #[error("the controller refused rtde protocol version {requested}")]
+    ProtocolVersionRejected {
+        /// The version asked for.
+        requested: u16,
+    },
+    /// The controller's software is older than this client supports.
+    #[error(
+        "controller version {major}.{minor} is not supported (need {min_major}.{min_minor} or newer)"
+    )]
+    ControllerVersionUnsupported {
+        /// Controller major version.
+        major: u32,
+        /// Controller minor version.
+        minor: u32,
+        /// Oldest supported major version.
+        min_major: u32,
+        /// Oldest supported minor version.
+        min_minor: u32,
+    },
+    /// The controller refused a request (start, pause, setup).
+    #[error("the controller refused {what}")]
+    Refused {
+        /// The request that was refused.
+        what: &'static str,
+    },
+    /// No answer in time.
+    #[error("timed out after {after_ms} ms waiting for {what}")]
+    Timeout {
+        /// What was awaited.
+        what: &'static str,
+        /// How long we waited [ms].
+        after_ms: u64,
+    },
+    /// The RTDE link is down (and is being re-established, or was closed).
+    #[error("rtde link down: {reason}")]
+    LinkDown {
+        /// Why.
+        reason: String,
+    },
+    /// A configuration value is out of range.
+    #[error("invalid configuration: {reason}")]
+    InvalidConfig {
+        /// What is wrong.
+        reason: String,
+    },
+    /// The dashboard server answered something unexpected.
+    #[error("dashboard command `{command}` failed: {reply}")]
+    Dashboard {
+        /// The command sent.
+        command: String,
+        /// The server's reply.
+        reply: String,
+    },
 
     // --- simulation and traces ---
+    /// A trace file could not be parsed; names the file, the 1-based line and the 1-based column
+    /// (field number, counting every column of the file).
+    #[error("{file}:{line}:{column}: {kind}")]
+    TraceParse {
+        /// The file (or the source name given to `Trace::parse`).
+        file: std::path::PathBuf,
+        /// 1-based physical line (CR, LF and CRLF each end a line).
+        line: usize,
+        /// 1-based column (field number in the line).
+        column: usize,
+        /// What is wrong.
+        kind: crate::trace::TraceParseErrorKind,
+    },
+    /// A row index past the end of a trace.
+    #[error("row {row} is out of range: the trace has {rows} rows")]
+    TraceRowOutOfRange {
+        /// The requested row (0-based).
+        row: usize,
+        /// Rows in the trace.
+        rows: usize,
+    },
+    /// A row or writer call with the wrong number of values.
+    #[error("expected {expected} values per row, got {found}")]
+    TraceRowLength {
+        /// Fields of the trace.
+        expected: usize,
+        /// Values given.
+        found: usize,
+    },
+    /// A field name the trace does not hold.
+    #[error("the trace has no field `{field}`")]
+    TraceUnknownField {
+        /// The field asked for.
+        field: String,
+    },
+    /// A field name given twice when building a trace.
+    #[error("field `{field}` appears twice")]
+    TraceDuplicateField {
+        /// The repeated name.
+        field: String,
+    },
+    /// Rows added to a trace must have strictly increasing timestamps.
+    #[error("timestamp {found} s does not follow {previous} s")]
+    TraceTimestampOrder {
+        /// The last timestamp in the trace [s].
+        previous: f64,
+        /// The timestamp of the rejected row [s].
+        found: f64,
+    },
+    /// A `ReplayRobot` was read past the end of its trace.
+    #[error("the replayed trace ended after {rows} rows")]
+    TraceEnded {
+        /// Rows in the trace.
+        rows: usize,
+    },
+    /// A `SimConfig` value or a `SimRobot` setting is invalid.
+    #[error("invalid simulator setting `{field}`: {reason}")]
+    InvalidSimConfig {
+        /// The setting.
+        field: &'static str,
+        /// Why it is invalid.
+        reason: &'static str,
+    },
+    /// A command the simulated controller refuses (non-finite values, or servoj parameters
+    /// outside the ranges UR's controller accepts).
+    #[error("invalid command: {reason}")]
+    InvalidCommand {
+        /// Why it is invalid.
+        reason: &'static str,
+    },
 }
 
 /// Result alias of this crate.
