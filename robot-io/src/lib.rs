@@ -21,9 +21,12 @@ pub mod script;
 pub mod replay;
 pub mod sim;
 pub mod trace;
+pub use replay::ReplayRobot;
+pub use sim::{SimConfig, SimRobot};
+pub use trace::{Trace, TraceReport};
 
 pub use error::{Result, RobotIoError};
 pub use types::{
-    robot_mode, runtime_state, safety_mode, safety_status_bits, JointCommand, Joints, Robot,
-    RobotState,
+    JointCommand, Joints, Robot, RobotState, robot_mode, runtime_state, safety_mode,
+    safety_status_bits,
 };

@@ -1,1 +1,901 @@
-//! (issue 3: simulation and traces; being written)
+//! `SimRobot`: an in-process UR5e model on a mock clock.
+//!
+//! Each [`SimRobot::step`] advances one 2 ms controller cycle ([`CYCLE_S`]); the controller
+//! `timestamp_s` is `initial_timestamp_s + cycles × 0.002 s`, computed from the cycle count so it
+//! does not drift. Nothing reads the wall clock, so a run is deterministic.
+//!
+//! # Motion model (behavioural, not UR's proprietary controller)
+//! The joint servos are ideal: `actual_q == target_q` and `actual_qd == target_qd`. Every cycle
+//! the model computes new joint velocities from the latched [`JointCommand`], then integrates
+//! `q += qd · dt` (semi-implicit Euler, dt = 2 ms).
+//!
+//! - **servoJ** `Servo { q, lookahead_s, gain }`: a reference `r` follows the commanded `q`
+//!   through a first-order filter with time constant `lookahead_s` [s] (the smoothing the
+//!   lookahead buys), and the joint follows `r` with a proportional position loop of bandwidth
+//!   `gain` [1/s]. Both are discretised exactly, so an unconstrained cycle moves the joint by
+//!   `(1 − e^(−gain·dt)) · (r − q)`; higher gain tracks tighter, a longer lookahead is smoother
+//!   and lags more. The resulting velocity is multiplied by the speed scale (below), capped at
+//!   `max_speed_rad_s × scale` and at the speed from which the joint can still stop at the
+//!   reference with `max_acc_rad_s2` (`√(2·a·|r − q|)`, so it does not overshoot), and its change
+//!   per cycle is limited to `max_acc_rad_s2 · dt`. `lookahead_s` must lie in [0.03, 0.2] and
+//!   `gain` in [100, 2000], as UR's servoj requires.
+//! - **speedJ** `Speed { qd, acc }`: the target velocity is `qd × scale`, shrunk uniformly (its
+//!   direction kept) so that no joint exceeds `max_speed_rad_s`; the velocity vector ramps
+//!   towards it along a straight line in joint space with the leading joint at
+//!   `min(acc, max_acc)` [rad/s²] (UR's "acceleration of the leading axis").
+//! - **stopJ** `Stop { decel }`: all joints decelerate together (they stop at the same instant),
+//!   the fastest at `min(decel, max_acc)` [rad/s²].
+//! - No latched command while running: the arm stops as for stopJ at `max_acc`.
+//!
+//! **Speed scale** = `speed_scaling × target_speed_fraction` while the program is PLAYING, and it
+//! multiplies the commanded velocities (not the accelerations or stops). The reported
+//! `speed_scaling` is 0 whenever the program is not PLAYING, as the real controller reports
+//! (see the recordings in `data/rtde-traces`).
+//!
+//! **Joint limits** (UR5e defaults, see [`SimConfig::ur5e`]): position ±2π rad, speed π rad/s,
+//! nominal acceleration π rad/s². Near a position limit the velocity is capped at the speed from
+//! which the joint can stop at the limit with `max_acc_rad_s2`, and the position is clamped to
+//! the limit.
+//!
+//! # Program, safety and injected faults
+//! - `runtime_state`: [`SimRobot::pause`] gives PAUSING while the arm brakes at `max_acc`, then
+//!   PAUSED; [`SimRobot::stop_program`] gives STOPPING then STOPPED; [`SimRobot::play`] gives
+//!   RESUMING for one cycle (from PAUSED) and then PLAYING.
+//! - [`SimRobot::inject_protective_stop`]: `safety_mode` PROTECTIVE_STOP, `safety_status_bits`
+//!   bits 2 (protective stop) and 10 (stopped due to safety); the arm brakes at
+//!   `safety_stop_decel_rad_s2` and the program pauses. [`SimRobot::clear_protective_stop`]
+//!   (the dashboard's "unlock protective stop") returns to NORMAL; the program stays PAUSED until
+//!   [`SimRobot::play`].
+//! - [`SimRobot::inject_emergency_stop`]: `safety_mode` ROBOT_EMERGENCY_STOP, bits 6, 7 and 10;
+//!   the arm brakes at `safety_stop_decel_rad_s2`, the program stops, and once the arm stands
+//!   still `robot_mode` becomes POWER_OFF. Recover with [`SimRobot::clear_emergency_stop`],
+//!   [`SimRobot::power_on`], [`SimRobot::brake_release`] and [`SimRobot::play`].
+//! - Motion commands sent while the program is not PLAYING, the arm is not RUNNING or a safety
+//!   stop is active are ignored (counted in [`SimRobot::ignored_commands`]). Entering any of
+//!   these states discards the latched command, so the arm stays still after recovery until a
+//!   new command arrives.
+//! - [`SimRobot::inject_dropped_cycles`]: for the next `n` steps the published state (what
+//!   [`Robot::read_state`] returns) is not updated, so the timestamp freezes, while the model
+//!   keeps moving; afterwards the published timestamp jumps by `(n + 1) × 2 ms`, as a client
+//!   sees skipped RTDE packages.
+//!
+//! `actual_tcp_pose` comes from UR5e forward kinematics ([`ur5e_tcp_pose`]);
+//! `actual_tcp_speed` is its finite difference over one cycle (linear [m/s], angular [rad/s] in
+//! the base frame).
+//!
+//! # Example
+//! ```
+//! use robot_io::sim::{SimConfig, SimRobot};
+//! use robot_io::{JointCommand, Robot, RobotState};
+//! let mut robot = SimRobot::new(SimConfig::ur5e())?;
+//! let mut state = RobotState::default();
+//! robot.send(&JointCommand::Speed { qd: [0.5, 0.0, 0.0, 0.0, 0.0, 0.0], acc: 1.0 })?;
+//! for _ in 0..500 {
+//!     robot.step();
+//! }
+//! robot.read_state(&mut state)?;
+//! assert!((state.timestamp_s - 1.0).abs() < 1e-12);
+//! assert!((state.actual_qd[0] - 0.5).abs() < 1e-9);
+//! # Ok::<(), robot_io::RobotIoError>(())
+//! ```
+//!
+//! `read_state`, `send` and `step` allocate nothing (checked by `tests/sim_alloc.rs`).
+
+use std::f64::consts::{FRAC_PI_2, PI, TAU};
+
+use crate::types::{
+    JointCommand, Joints, Robot, RobotState, robot_mode, runtime_state, safety_mode,
+    safety_status_bits,
+};
+use crate::{Result, RobotIoError};
+
+/// The controller cycle [s]: 2 ms (500 Hz).
+pub const CYCLE_S: f64 = 0.002;
+
+/// UR5e standard DH parameter d [m], base to wrist 3.
+pub const UR5E_DH_D: Joints = [0.1625, 0.0, 0.0, 0.1333, 0.0997, 0.0996];
+/// UR5e standard DH parameter a [m].
+pub const UR5E_DH_A: Joints = [0.0, -0.425, -0.3922, 0.0, 0.0, 0.0];
+/// UR5e standard DH parameter alpha [rad].
+pub const UR5E_DH_ALPHA: Joints = [FRAC_PI_2, 0.0, 0.0, FRAC_PI_2, -FRAC_PI_2, 0.0];
+
+/// Accepted servoj lookahead time range [s] (UR's servoj).
+pub const SERVO_LOOKAHEAD_RANGE_S: (f64, f64) = (0.03, 0.2);
+/// Accepted servoj gain range [1/s] (UR's servoj).
+pub const SERVO_GAIN_RANGE: (f64, f64) = (100.0, 2000.0);
+
+/// `safety_status_bits` bit 0: normal mode.
+const BIT_NORMAL_MODE: u32 = 1 << 0;
+/// `safety_status_bits` bit 6: robot emergency stopped.
+const BIT_ROBOT_EMERGENCY_STOP: u32 = 1 << 6;
+/// `robot_status_bits` bit 0: power on.
+const BIT_POWER_ON: u32 = 1 << 0;
+/// `robot_status_bits` bit 1: program running.
+const BIT_PROGRAM_RUNNING: u32 = 1 << 1;
+
+/// Configuration of a [`SimRobot`]; validated by [`SimRobot::new`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimConfig {
+    /// Initial joint positions [rad].
+    pub initial_q_rad: Joints,
+    /// Controller timestamp at construction [s].
+    pub initial_timestamp_s: f64,
+    /// Lower joint position limits [rad].
+    pub min_q_rad: Joints,
+    /// Upper joint position limits [rad].
+    pub max_q_rad: Joints,
+    /// Joint speed limits [rad/s], > 0.
+    pub max_speed_rad_s: Joints,
+    /// Joint acceleration limits [rad/s²], > 0: caps servoJ and speedJ acceleration and stopJ
+    /// deceleration.
+    pub max_acc_rad_s2: Joints,
+    /// Deceleration of protective and emergency stops, leading joint [rad/s²], > 0.
+    pub safety_stop_decel_rad_s2: f64,
+    /// Initial controller speed scaling [-] in [0, 1].
+    pub speed_scaling: f64,
+    /// Initial speed slider fraction [-] in [0, 1].
+    pub target_speed_fraction: f64,
+}
+
+impl SimConfig {
+    /// UR5e defaults: upright home pose `[0, −π/2, 0, −π/2, 0, 0]` rad, limits ±2π rad,
+    /// π rad/s, π rad/s² (nominal), safety stops at 2π rad/s², scaling 1, timestamp 0 s.
+    pub fn ur5e() -> Self {
+        Self {
+            initial_q_rad: [0.0, -FRAC_PI_2, 0.0, -FRAC_PI_2, 0.0, 0.0],
+            initial_timestamp_s: 0.0,
+            min_q_rad: [-TAU; 6],
+            max_q_rad: [TAU; 6],
+            max_speed_rad_s: [PI; 6],
+            max_acc_rad_s2: [PI; 6],
+            safety_stop_decel_rad_s2: TAU,
+            speed_scaling: 1.0,
+            target_speed_fraction: 1.0,
+        }
+    }
+
+    fn validate(&self) -> Result<()> {
+        let bad = |field, reason| Err(RobotIoError::InvalidSimConfig { field, reason });
+        if !self.initial_timestamp_s.is_finite() || self.initial_timestamp_s < 0.0 {
+            return bad("initial_timestamp_s", "must be finite and >= 0");
+        }
+        for j in 0..6 {
+            let (Some(&lo), Some(&hi), Some(&q0), Some(&v), Some(&a)) = (
+                self.min_q_rad.get(j),
+                self.max_q_rad.get(j),
+                self.initial_q_rad.get(j),
+                self.max_speed_rad_s.get(j),
+                self.max_acc_rad_s2.get(j),
+            ) else {
+                continue;
+            };
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return bad(
+                    "min_q_rad/max_q_rad",
+                    "limits must be finite with min < max",
+                );
+            }
+            if !(q0.is_finite() && lo <= q0 && q0 <= hi) {
+                return bad(
+                    "initial_q_rad",
+                    "must be finite and within the joint limits",
+                );
+            }
+            if !(v.is_finite() && v > 0.0) {
+                return bad("max_speed_rad_s", "must be finite and > 0");
+            }
+            if !(a.is_finite() && a > 0.0) {
+                return bad("max_acc_rad_s2", "must be finite and > 0");
+            }
+        }
+        if !(self.safety_stop_decel_rad_s2.is_finite() && self.safety_stop_decel_rad_s2 > 0.0) {
+            return bad("safety_stop_decel_rad_s2", "must be finite and > 0");
+        }
+        check_fraction("speed_scaling", self.speed_scaling)?;
+        check_fraction("target_speed_fraction", self.target_speed_fraction)
+    }
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self::ur5e()
+    }
+}
+
+fn check_fraction(field: &'static str, value: f64) -> Result<()> {
+    if (0.0..=1.0).contains(&value) {
+        Ok(())
+    } else {
+        Err(RobotIoError::InvalidSimConfig {
+            field,
+            reason: "must lie in [0, 1]",
+        })
+    }
+}
+
+/// Per-joint limits, copied from the config.
+#[derive(Debug, Clone, Copy)]
+struct JointLimits {
+    min_q: f64,
+    max_q: f64,
+    max_speed: f64,
+    max_acc: f64,
+}
+
+/// Per-joint model state.
+#[derive(Debug, Clone, Copy, Default)]
+struct JointState {
+    /// Position [rad].
+    q: f64,
+    /// Velocity [rad/s].
+    qd: f64,
+    /// servoJ filtered reference [rad].
+    servo_ref: f64,
+}
+
+/// What the arm does this cycle.
+#[derive(Debug, Clone, Copy)]
+enum Motion {
+    /// Bring every joint to rest together, leading joint at this deceleration [rad/s²].
+    Brake(f64),
+    /// Ramp to these velocities [rad/s], leading joint at this acceleration [rad/s²].
+    Ramp(Joints, f64),
+    /// servoJ tracking.
+    Servo {
+        q: Joints,
+        lookahead_s: f64,
+        gain: f64,
+    },
+}
+
+/// An in-process UR5e model stepped on a mock clock (see the module docs for the model).
+#[derive(Debug, Clone)]
+pub struct SimRobot {
+    config: SimConfig,
+    limits: [JointLimits; 6],
+    joints: [JointState; 6],
+    cycle: u64,
+    command: Option<JointCommand>,
+    servo_active: bool,
+    speed_scaling: f64,
+    target_speed_fraction: f64,
+    robot_mode: i32,
+    safety_mode: i32,
+    safety_status_bits: u32,
+    runtime_state: u32,
+    /// Steps left during which the published state is frozen.
+    dropped_remaining: u64,
+    ignored_commands: u64,
+    /// The model's true state after the last step.
+    state: RobotState,
+    /// What `read_state` returns.
+    published: RobotState,
+    /// TCP rotation after the last step, for the angular TCP speed.
+    tcp_rotation: Mat3,
+}
+
+impl SimRobot {
+    /// A robot at rest at `config.initial_q_rad`, powered, brakes released (RUNNING), program
+    /// PLAYING, safety NORMAL, no command latched.
+    pub fn new(config: SimConfig) -> Result<SimRobot> {
+        config.validate()?;
+        let mut limits = [JointLimits {
+            min_q: 0.0,
+            max_q: 0.0,
+            max_speed: 0.0,
+            max_acc: 0.0,
+        }; 6];
+        let mut joints = [JointState::default(); 6];
+        for (j, (l, s)) in limits.iter_mut().zip(joints.iter_mut()).enumerate() {
+            let pick = |a: &Joints| a.get(j).copied().unwrap_or_default();
+            *l = JointLimits {
+                min_q: pick(&config.min_q_rad),
+                max_q: pick(&config.max_q_rad),
+                max_speed: pick(&config.max_speed_rad_s),
+                max_acc: pick(&config.max_acc_rad_s2),
+            };
+            let q = pick(&config.initial_q_rad);
+            *s = JointState {
+                q,
+                qd: 0.0,
+                servo_ref: q,
+            };
+        }
+        let mut robot = SimRobot {
+            speed_scaling: config.speed_scaling,
+            target_speed_fraction: config.target_speed_fraction,
+            config,
+            limits,
+            joints,
+            cycle: 0,
+            command: None,
+            servo_active: false,
+            robot_mode: robot_mode::RUNNING,
+            safety_mode: safety_mode::NORMAL,
+            safety_status_bits: BIT_NORMAL_MODE,
+            runtime_state: runtime_state::PLAYING,
+            dropped_remaining: 0,
+            ignored_commands: 0,
+            state: RobotState::default(),
+            published: RobotState::default(),
+            tcp_rotation: IDENTITY,
+        };
+        let q = robot.joint_positions();
+        robot.tcp_rotation = ur5e_tcp_transform(&q).0;
+        robot.update_state([0.0; 6]);
+        robot.published = robot.state;
+        Ok(robot)
+    }
+
+    /// Advance one 2 ms controller cycle: move the arm per the latched command and the
+    /// program/safety state, advance the timestamp, and publish the new state (unless a dropped
+    /// cycle is injected). Allocates nothing.
+    pub fn step(&mut self) {
+        self.cycle = self.cycle.saturating_add(1);
+        let (old_rot, old_pos) = (self.tcp_rotation, self.state.actual_tcp_pose);
+
+        let motion = self.motion();
+        let velocities = match motion {
+            Motion::Brake(decel) => {
+                self.servo_active = false;
+                self.ramp(&[0.0; 6], decel)
+            }
+            Motion::Ramp(target, acc) => {
+                self.servo_active = false;
+                self.ramp(&target, acc)
+            }
+            Motion::Servo {
+                q,
+                lookahead_s,
+                gain,
+            } => self.servo(&q, lookahead_s, gain),
+        };
+        self.integrate(&velocities);
+
+        // Program state transitions that depend on the arm standing still.
+        let at_rest = self.joints.iter().all(|j| j.qd == 0.0);
+        match self.runtime_state {
+            runtime_state::RESUMING => self.runtime_state = runtime_state::PLAYING,
+            runtime_state::PAUSING if at_rest => self.runtime_state = runtime_state::PAUSED,
+            runtime_state::STOPPING if at_rest => self.runtime_state = runtime_state::STOPPED,
+            _ => {}
+        }
+        let estopped = self.safety_mode == safety_mode::ROBOT_EMERGENCY_STOP
+            || self.safety_mode == safety_mode::SYSTEM_EMERGENCY_STOP;
+        if estopped && at_rest {
+            self.robot_mode = robot_mode::POWER_OFF;
+        }
+
+        // TCP pose and speed.
+        let q = self.joint_positions();
+        let (rot, pos) = ur5e_tcp_transform(&q);
+        let linear = [
+            (pos[0] - old_pos[0]) / CYCLE_S,
+            (pos[1] - old_pos[1]) / CYCLE_S,
+            (pos[2] - old_pos[2]) / CYCLE_S,
+        ];
+        let delta = rotation_vector(&mat_mul(&rot, &transpose(&old_rot)));
+        let angular = [delta[0] / CYCLE_S, delta[1] / CYCLE_S, delta[2] / CYCLE_S];
+        self.tcp_rotation = rot;
+        self.update_state([
+            linear[0], linear[1], linear[2], angular[0], angular[1], angular[2],
+        ]);
+
+        if self.dropped_remaining > 0 {
+            self.dropped_remaining -= 1;
+        } else {
+            self.published = self.state;
+        }
+    }
+
+    /// The model's true state after the last step (unaffected by injected dropped cycles).
+    pub fn state(&self) -> &RobotState {
+        &self.state
+    }
+
+    /// Cycles stepped since construction.
+    pub fn cycles(&self) -> u64 {
+        self.cycle
+    }
+
+    /// The configuration the robot was built with.
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
+    /// The latched command, if any.
+    pub fn command(&self) -> Option<&JointCommand> {
+        self.command.as_ref()
+    }
+
+    /// Motion commands ignored because the program was not PLAYING, the arm not RUNNING or a
+    /// safety stop active.
+    pub fn ignored_commands(&self) -> u64 {
+        self.ignored_commands
+    }
+
+    /// Set the controller's speed scaling [-] in [0, 1] (e.g. to emulate trajectory limiting).
+    pub fn set_speed_scaling(&mut self, speed_scaling: f64) -> Result<()> {
+        check_fraction("speed_scaling", speed_scaling)?;
+        self.speed_scaling = speed_scaling;
+        Ok(())
+    }
+
+    /// Set the speed slider [-] in [0, 1] (`target_speed_fraction`).
+    pub fn set_target_speed_fraction(&mut self, fraction: f64) -> Result<()> {
+        check_fraction("target_speed_fraction", fraction)?;
+        self.target_speed_fraction = fraction;
+        Ok(())
+    }
+
+    /// Pause the program: PAUSING while the arm brakes, then PAUSED. Discards the latched
+    /// command. No effect unless PLAYING or RESUMING.
+    pub fn pause(&mut self) {
+        if matches!(
+            self.runtime_state,
+            runtime_state::PLAYING | runtime_state::RESUMING
+        ) {
+            self.runtime_state = runtime_state::PAUSING;
+            self.command = None;
+        }
+    }
+
+    /// Stop the program: STOPPING while the arm brakes, then STOPPED. Discards the latched
+    /// command.
+    pub fn stop_program(&mut self) {
+        if !matches!(
+            self.runtime_state,
+            runtime_state::STOPPED | runtime_state::STOPPING
+        ) {
+            self.runtime_state = runtime_state::STOPPING;
+            self.command = None;
+        }
+    }
+
+    /// Play: from PAUSED, RESUMING for one cycle then PLAYING; from STOPPED, PLAYING. Refused
+    /// (returns `false`) while a safety stop is active, the arm is not RUNNING, or the program
+    /// is still pausing or stopping.
+    pub fn play(&mut self) -> bool {
+        if self.safety_stopped() || self.robot_mode != robot_mode::RUNNING {
+            return false;
+        }
+        match self.runtime_state {
+            runtime_state::PAUSED => self.runtime_state = runtime_state::RESUMING,
+            runtime_state::STOPPED => self.runtime_state = runtime_state::PLAYING,
+            runtime_state::PLAYING | runtime_state::RESUMING => {}
+            _ => return false,
+        }
+        true
+    }
+
+    /// Inject a protective stop (see the module docs).
+    pub fn inject_protective_stop(&mut self) {
+        if self.safety_stopped() {
+            return;
+        }
+        self.safety_mode = safety_mode::PROTECTIVE_STOP;
+        self.safety_status_bits =
+            safety_status_bits::PROTECTIVE_STOP | safety_status_bits::STOPPED_DUE_TO_SAFETY;
+        self.command = None;
+        if matches!(
+            self.runtime_state,
+            runtime_state::PLAYING | runtime_state::RESUMING
+        ) {
+            self.runtime_state = runtime_state::PAUSING;
+        }
+    }
+
+    /// Unlock a protective stop: back to NORMAL; the program stays paused until
+    /// [`SimRobot::play`]. Returns `false` (and does nothing) if no protective stop is active.
+    pub fn clear_protective_stop(&mut self) -> bool {
+        if self.safety_mode != safety_mode::PROTECTIVE_STOP {
+            return false;
+        }
+        self.safety_mode = safety_mode::NORMAL;
+        self.safety_status_bits = BIT_NORMAL_MODE;
+        true
+    }
+
+    /// Inject a robot emergency stop (see the module docs).
+    pub fn inject_emergency_stop(&mut self) {
+        self.safety_mode = safety_mode::ROBOT_EMERGENCY_STOP;
+        self.safety_status_bits = BIT_ROBOT_EMERGENCY_STOP
+            | safety_status_bits::EMERGENCY_STOP
+            | safety_status_bits::STOPPED_DUE_TO_SAFETY;
+        self.command = None;
+        if self.runtime_state != runtime_state::STOPPED {
+            self.runtime_state = runtime_state::STOPPING;
+        }
+    }
+
+    /// Release an emergency stop once the arm stands still: safety NORMAL, `robot_mode`
+    /// POWER_OFF. Returns `false` (and does nothing) if no e-stop is active or the arm still
+    /// moves.
+    pub fn clear_emergency_stop(&mut self) -> bool {
+        let estopped = self.safety_mode == safety_mode::ROBOT_EMERGENCY_STOP
+            || self.safety_mode == safety_mode::SYSTEM_EMERGENCY_STOP;
+        if !estopped || self.robot_mode != robot_mode::POWER_OFF {
+            return false;
+        }
+        self.safety_mode = safety_mode::NORMAL;
+        self.safety_status_bits = BIT_NORMAL_MODE;
+        true
+    }
+
+    /// Power on: POWER_OFF → IDLE (brakes engaged). Returns `false` if not POWER_OFF or a
+    /// safety stop is active.
+    pub fn power_on(&mut self) -> bool {
+        if self.robot_mode != robot_mode::POWER_OFF || self.safety_stopped() {
+            return false;
+        }
+        self.robot_mode = robot_mode::IDLE;
+        true
+    }
+
+    /// Release the brakes: IDLE → RUNNING. Returns `false` if not IDLE.
+    pub fn brake_release(&mut self) -> bool {
+        if self.robot_mode != robot_mode::IDLE {
+            return false;
+        }
+        self.robot_mode = robot_mode::RUNNING;
+        true
+    }
+
+    /// Freeze the published state for the next `cycles` steps (dropped RTDE packages); adds to
+    /// any injection still pending.
+    pub fn inject_dropped_cycles(&mut self, cycles: u64) {
+        self.dropped_remaining = self.dropped_remaining.saturating_add(cycles);
+    }
+
+    fn safety_stopped(&self) -> bool {
+        !(self.safety_mode == safety_mode::NORMAL || self.safety_mode == safety_mode::REDUCED)
+    }
+
+    fn accepts_motion(&self) -> bool {
+        !self.safety_stopped()
+            && self.robot_mode == robot_mode::RUNNING
+            && self.runtime_state == runtime_state::PLAYING
+    }
+
+    fn min_max_acc(&self) -> f64 {
+        self.limits
+            .iter()
+            .map(|l| l.max_acc)
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// Combined speed scale applied to commanded velocities.
+    fn scale(&self) -> f64 {
+        if self.runtime_state == runtime_state::PLAYING {
+            self.speed_scaling * self.target_speed_fraction
+        } else {
+            0.0
+        }
+    }
+
+    fn motion(&self) -> Motion {
+        if self.safety_stopped() || self.robot_mode != robot_mode::RUNNING {
+            return Motion::Brake(self.config.safety_stop_decel_rad_s2);
+        }
+        let max_acc = self.min_max_acc();
+        if self.runtime_state != runtime_state::PLAYING {
+            return Motion::Brake(max_acc);
+        }
+        match self.command {
+            None => Motion::Brake(max_acc),
+            Some(JointCommand::Stop { decel }) => Motion::Brake(decel.min(max_acc)),
+            Some(JointCommand::Speed { qd, acc }) => {
+                let scale = self.scale();
+                // Shrink uniformly so that no joint exceeds its speed limit.
+                let shrink = qd
+                    .iter()
+                    .zip(&self.limits)
+                    .map(|(v, l)| {
+                        if v.abs() > l.max_speed {
+                            l.max_speed / v.abs()
+                        } else {
+                            1.0
+                        }
+                    })
+                    .fold(1.0, f64::min);
+                Motion::Ramp(qd.map(|v| v * shrink * scale), acc.min(max_acc))
+            }
+            Some(JointCommand::Servo {
+                q,
+                lookahead_s,
+                gain,
+            }) => Motion::Servo {
+                q,
+                lookahead_s,
+                gain,
+            },
+        }
+    }
+
+    /// Velocities after one cycle of a straight-line ramp (in joint space) to `target`, the
+    /// leading joint at `acc` [rad/s²].
+    fn ramp(&self, target: &Joints, acc: f64) -> Joints {
+        let mut out = [0.0; 6];
+        let max_delta = self
+            .joints
+            .iter()
+            .zip(target)
+            .map(|(j, t)| (t - j.qd).abs())
+            .fold(0.0, f64::max);
+        let step = acc * CYCLE_S;
+        let k = if max_delta <= step {
+            1.0
+        } else {
+            step / max_delta
+        };
+        for ((o, j), t) in out.iter_mut().zip(&self.joints).zip(target) {
+            *o = if k == 1.0 { *t } else { j.qd + (t - j.qd) * k };
+        }
+        out
+    }
+
+    /// Velocities after one cycle of servoJ tracking (see the module docs).
+    fn servo(&mut self, target: &Joints, lookahead_s: f64, gain: f64) -> Joints {
+        if !self.servo_active {
+            for j in &mut self.joints {
+                j.servo_ref = j.q;
+            }
+            self.servo_active = true;
+        }
+        let scale = self.scale();
+        let filter = 1.0 - (-CYCLE_S / lookahead_s).exp();
+        let track = 1.0 - (-gain * CYCLE_S).exp();
+        let mut out = [0.0; 6];
+        for ((o, j), (l, t)) in out
+            .iter_mut()
+            .zip(&mut self.joints)
+            .zip(self.limits.iter().zip(target))
+        {
+            j.servo_ref += (t - j.servo_ref) * filter;
+            let error = j.servo_ref - j.q;
+            let cap = (l.max_speed * scale).min((2.0 * l.max_acc * error.abs()).sqrt());
+            let wanted = (error * track / CYCLE_S * scale).clamp(-cap, cap);
+            let dv = l.max_acc * CYCLE_S;
+            *o = j.qd + (wanted - j.qd).clamp(-dv, dv);
+        }
+        out
+    }
+
+    /// Apply the position-limit envelope and integrate one cycle.
+    fn integrate(&mut self, velocities: &Joints) {
+        for ((j, l), &v) in self.joints.iter_mut().zip(&self.limits).zip(velocities) {
+            let mut v = v;
+            if v > 0.0 {
+                v = v.min((2.0 * l.max_acc * (l.max_q - j.q).max(0.0)).sqrt());
+            } else if v < 0.0 {
+                v = v.max(-(2.0 * l.max_acc * (j.q - l.min_q).max(0.0)).sqrt());
+            }
+            let mut q = j.q + v * CYCLE_S;
+            if q >= l.max_q {
+                q = l.max_q;
+                v = v.min(0.0);
+            } else if q <= l.min_q {
+                q = l.min_q;
+                v = v.max(0.0);
+            }
+            j.q = q;
+            j.qd = v;
+        }
+    }
+
+    fn joint_positions(&self) -> Joints {
+        self.joints.map(|j| j.q)
+    }
+
+    fn update_state(&mut self, tcp_speed: [f64; 6]) {
+        let q = self.joint_positions();
+        let qd = self.joints.map(|j| j.qd);
+        let s = &mut self.state;
+        s.timestamp_s = self.config.initial_timestamp_s + self.cycle as f64 * CYCLE_S;
+        s.actual_q = q;
+        s.actual_qd = qd;
+        s.target_q = q;
+        s.target_qd = qd;
+        s.actual_tcp_pose = ur5e_tcp_pose(&q);
+        s.actual_tcp_speed = tcp_speed;
+        s.speed_scaling = if self.runtime_state == runtime_state::PLAYING {
+            self.speed_scaling
+        } else {
+            0.0
+        };
+        s.target_speed_fraction = self.target_speed_fraction;
+        s.robot_mode = self.robot_mode;
+        s.safety_mode = self.safety_mode;
+        s.runtime_state = self.runtime_state;
+        let mut bits = 0;
+        if self.robot_mode != robot_mode::POWER_OFF {
+            bits |= BIT_POWER_ON;
+        }
+        if self.runtime_state == runtime_state::PLAYING {
+            bits |= BIT_PROGRAM_RUNNING;
+        }
+        s.robot_status_bits = bits;
+        s.safety_status_bits = self.safety_status_bits;
+    }
+}
+
+impl Robot for SimRobot {
+    /// Copies the published state; does not advance the model (call [`SimRobot::step`]).
+    ///
+    /// # Implementation
+    /// Never blocks, never fails, allocates nothing.
+    fn read_state(&mut self, out: &mut RobotState) -> Result<()> {
+        *out = self.published;
+        Ok(())
+    }
+
+    /// Latches `cmd`; it acts from the next [`SimRobot::step`] until replaced. Ignored (still
+    /// `Ok`) while the program is not PLAYING, the arm not RUNNING, or a safety stop is active.
+    ///
+    /// # Implementation
+    /// Never blocks, allocates nothing. Errors ([`RobotIoError::InvalidCommand`]) for
+    /// non-finite values, a non-positive acceleration or deceleration, or servoj lookahead or
+    /// gain outside UR's ranges ([`SERVO_LOOKAHEAD_RANGE_S`], [`SERVO_GAIN_RANGE`]).
+    fn send(&mut self, cmd: &JointCommand) -> Result<()> {
+        validate_command(cmd)?;
+        if self.accepts_motion() {
+            self.command = Some(*cmd);
+        } else {
+            self.ignored_commands = self.ignored_commands.saturating_add(1);
+        }
+        Ok(())
+    }
+}
+
+fn validate_command(cmd: &JointCommand) -> Result<()> {
+    let invalid = |reason| Err(RobotIoError::InvalidCommand { reason });
+    match *cmd {
+        JointCommand::Servo {
+            q,
+            lookahead_s,
+            gain,
+        } => {
+            if !q.iter().all(|v| v.is_finite()) {
+                return invalid("servoj target is not finite");
+            }
+            let (lo, hi) = SERVO_LOOKAHEAD_RANGE_S;
+            if !(lo..=hi).contains(&lookahead_s) {
+                return invalid("servoj lookahead outside [0.03, 0.2] s");
+            }
+            let (lo, hi) = SERVO_GAIN_RANGE;
+            if !(lo..=hi).contains(&gain) {
+                return invalid("servoj gain outside [100, 2000]");
+            }
+        }
+        JointCommand::Speed { qd, acc } => {
+            if !qd.iter().all(|v| v.is_finite()) {
+                return invalid("speedj velocity is not finite");
+            }
+            if !(acc.is_finite() && acc > 0.0) {
+                return invalid("speedj acceleration must be finite and > 0");
+            }
+        }
+        JointCommand::Stop { decel } => {
+            if !(decel.is_finite() && decel > 0.0) {
+                return invalid("stopj deceleration must be finite and > 0");
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A 3×3 rotation matrix, row-major [-].
+pub type Mat3 = [[f64; 3]; 3];
+
+const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+
+fn mat_mul(a: &Mat3, b: &Mat3) -> Mat3 {
+    let mut out = [[0.0; 3]; 3];
+    for (out_row, a_row) in out.iter_mut().zip(a) {
+        for (c, o) in out_row.iter_mut().enumerate() {
+            *o = a_row
+                .iter()
+                .zip(b)
+                .map(|(x, b_row)| x * b_row.get(c).copied().unwrap_or_default())
+                .sum();
+        }
+    }
+    out
+}
+
+fn mat_vec(a: &Mat3, v: &[f64; 3]) -> [f64; 3] {
+    a.map(|row| row[0] * v[0] + row[1] * v[1] + row[2] * v[2])
+}
+
+fn transpose(a: &Mat3) -> Mat3 {
+    [
+        [a[0][0], a[1][0], a[2][0]],
+        [a[0][1], a[1][1], a[2][1]],
+        [a[0][2], a[1][2], a[2][2]],
+    ]
+}
+
+/// The rotation vector (axis × angle [rad], angle in [0, π]) of a rotation matrix.
+pub fn rotation_vector(r: &Mat3) -> [f64; 3] {
+    let v = [r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1]];
+    let sin2 = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(); // 2 sin θ
+    let cos2 = r[0][0] + r[1][1] + r[2][2] - 1.0; // 2 cos θ
+    let angle = sin2.atan2(cos2);
+    if angle < 1e-12 {
+        // First order: R ≈ I + [ω]×.
+        return [v[0] / 2.0, v[1] / 2.0, v[2] / 2.0];
+    }
+    if angle < PI - 1e-4 {
+        let k = angle / sin2;
+        return [v[0] * k, v[1] * k, v[2] * k];
+    }
+    // Near π: the axis from the symmetric part, R + I ≈ 2 n nᵀ; pick the largest diagonal.
+    let d = [r[0][0], r[1][1], r[2][2]];
+    let mut axis = if d[0] >= d[1] && d[0] >= d[2] {
+        let x = ((d[0] + 1.0) / 2.0).max(0.0).sqrt();
+        [
+            x,
+            (r[0][1] + r[1][0]) / (4.0 * x),
+            (r[0][2] + r[2][0]) / (4.0 * x),
+        ]
+    } else if d[1] >= d[2] {
+        let y = ((d[1] + 1.0) / 2.0).max(0.0).sqrt();
+        [
+            (r[0][1] + r[1][0]) / (4.0 * y),
+            y,
+            (r[1][2] + r[2][1]) / (4.0 * y),
+        ]
+    } else {
+        let z = ((d[2] + 1.0) / 2.0).max(0.0).sqrt();
+        [
+            (r[0][2] + r[2][0]) / (4.0 * z),
+            (r[1][2] + r[2][1]) / (4.0 * z),
+            z,
+        ]
+    };
+    let norm = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+    // Orient the axis with the (small but signed) antisymmetric part.
+    let sign = if axis[0] * v[0] + axis[1] * v[1] + axis[2] * v[2] < 0.0 {
+        -1.0
+    } else {
+        1.0
+    };
+    for a in &mut axis {
+        *a *= sign * angle / norm;
+    }
+    axis
+}
+
+/// UR5e forward kinematics with the standard UR DH convention
+/// (`T_i = Rz(θ_i)·Tz(d_i)·Tx(a_i)·Rx(α_i)`, parameters [`UR5E_DH_D`], [`UR5E_DH_A`],
+/// [`UR5E_DH_ALPHA`]): the flange (tool0, no TCP offset) in the base frame, as a rotation
+/// matrix and a position [m].
+pub fn ur5e_tcp_transform(q: &Joints) -> (Mat3, [f64; 3]) {
+    let mut rot = IDENTITY;
+    let mut pos = [0.0; 3];
+    for ((&theta, &d), (&a, &alpha)) in q
+        .iter()
+        .zip(&UR5E_DH_D)
+        .zip(UR5E_DH_A.iter().zip(&UR5E_DH_ALPHA))
+    {
+        let (st, ct) = theta.sin_cos();
+        let (sa, ca) = alpha.sin_cos();
+        let link: Mat3 = [
+            [ct, -st * ca, st * sa],
+            [st, ct * ca, -ct * sa],
+            [0.0, sa, ca],
+        ];
+        let offset = mat_vec(&rot, &[a * ct, a * st, d]);
+        pos = [pos[0] + offset[0], pos[1] + offset[1], pos[2] + offset[2]];
+        rot = mat_mul(&rot, &link);
+    }
+    (rot, pos)
+}
+
+/// UR5e flange pose for joint positions `q` [rad]: position [m] and rotation vector [rad] in
+/// the base frame, as in RTDE's `actual_TCP_pose` with no TCP offset configured.
+pub fn ur5e_tcp_pose(q: &Joints) -> [f64; 6] {
+    let (rot, pos) = ur5e_tcp_transform(q);
+    let rv = rotation_vector(&rot);
+    [pos[0], pos[1], pos[2], rv[0], rv[1], rv[2]]
+}
