@@ -76,8 +76,10 @@ pub struct Assessor {
     confirm: Confirmer,
     confirm_per: Confirmer,
     confirm_act: Confirmer,
-    /// Scratch: cue evidence per area, rows head, body, hand.
+    /// Cue evidence per area on the last frame: (head, body, hand).
     evidence: Vec<[f64; 3]>,
+    /// Fused score S_i per area on the last frame.
+    scores: Vec<f64>,
     hands: [HandTrack; 2],
     /// The last `turn_lookback_frames` valid body frames, (t, yaw), as a ring.
     yaw_ring: Vec<(f64, f64)>,
@@ -151,6 +153,7 @@ impl Assessor {
             confirm_per: Confirmer::new(n, m),
             confirm_act: Confirmer::new(n, m),
             evidence: vec![[0.0; 3]; n],
+            scores: vec![0.0; n],
             hands: [track; 2],
             yaw_ring: vec![(0.0, 0.0); cfg.fusion.turn_lookback_frames],
             yaw_next: 0,
@@ -180,6 +183,17 @@ impl Assessor {
     /// The configuration in force.
     pub fn config(&self) -> &AssessConfig {
         &self.cfg
+    }
+
+    /// §1 cue evidence (S_i^h, S_i^b, S_i^m) of every area on the last accepted frame [-];
+    /// 0 for a missing cue.
+    pub fn cue_evidence(&self) -> &[[f64; 3]] {
+        &self.evidence
+    }
+
+    /// §2 fused score S_i of every area on the last accepted frame [-].
+    pub fn fused_scores(&self) -> &[f64] {
+        &self.scores
     }
 
     /// The latest assessment (the one the last `update` returned).
@@ -255,6 +269,7 @@ impl Assessor {
             ];
             self.evidence[i] = e;
             let s = weights[0] * e[0] + weights[1] * e[1] + weights[2] * e[2];
+            self.scores[i] = s;
             if s > best.1 {
                 best = (i, s);
             }
