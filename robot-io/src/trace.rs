@@ -992,3 +992,437 @@ fn split(line: &str, dialect: Dialect) -> Box<dyn Iterator<Item = &str> + '_> {
         Dialect::Space => Box::new(line.split_ascii_whitespace()),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::types::runtime_state;
+
+    fn data(name: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../data/rtde-traces")
+            .join(name)
+    }
+
+    /// Every recording in `data/rtde-traces`, with its rows and RTDE fields (counted
+    /// independently from the files: lines with data, columns from `timestamp` on).
+    const REAL_TRACES: [(&str, usize, usize, Dialect); 6] = [
+        ("eseries_10hz_recordpy_paused.csv", 256, 119, Dialect::Space),
+        ("ur3e_25hz_rad_segment_L0L1.csv", 29, 173, Dialect::Comma),
+        ("ur3e_25hz_rad_segment_L1L2.csv", 65, 173, Dialect::Comma),
+        ("ur3e_25hz_rad_segment_L2L3.csv", 40, 173, Dialect::Comma),
+        ("ur3e_25hz_rad_segment_L3L4.csv", 49, 173, Dialect::Comma),
+        ("ur3e_25hz_rad_segment_L4L5.csv", 42, 173, Dialect::Comma),
+    ];
+
+    fn parse_err(text: &str) -> (usize, usize, TraceParseErrorKind, String) {
+        match Trace::parse(text, "bad.csv") {
+            Err(e @ RobotIoError::TraceParse { .. }) => {
+                let msg = e.to_string();
+                let RobotIoError::TraceParse {
+                    line, column, kind, ..
+                } = e
+                else {
+                    unreachable!()
+                };
+                (line, column, kind, msg)
+            }
+            other => panic!("expected a parse error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn every_real_trace_parses_with_expected_rows_and_fields() {
+        for (name, rows, fields, dialect) in REAL_TRACES {
+            let trace = Trace::read(data(name)).unwrap();
+            assert_eq!(trace.len(), rows, "{name}");
+            assert_eq!(trace.field_count(), fields, "{name}");
+            assert_eq!(trace.dialect(), dialect, "{name}");
+            assert_eq!(trace.field_names()[0], "timestamp");
+            let report = trace.report();
+            assert_eq!(report.duplicates_removed, 0, "{name}");
+            assert!(report.gaps.is_empty(), "{name}: {:?}", report.gaps);
+            let expected_period = if name.contains("10hz") { 0.1 } else { 0.04 };
+            let period = report.nominal_period_s.unwrap();
+            assert!((period - expected_period).abs() < 1e-6, "{name}: {period}");
+        }
+    }
+
+    #[test]
+    fn record_py_values_are_read_exactly() {
+        // Values copied from the first data line of the file.
+        let trace = Trace::read(data("eseries_10hz_recordpy_paused.csv")).unwrap();
+        assert_eq!(trace.timestamp(0), Some(4029.5389999999998));
+        assert_eq!(trace.value(0, "actual_q_0"), Some(1.2144851098128129e-05));
+        assert_eq!(trace.value(0, "actual_q_1"), Some(-1.5707534360957034));
+        assert_eq!(
+            trace.value(0, "actual_TCP_pose_2"),
+            Some(1.0802957867938283)
+        );
+        assert_eq!(trace.value(0, "no_such_field"), None);
+        assert!(trace.leading_names().is_empty());
+        // `-0.0` in the file keeps its sign.
+        let qd_2 = trace.value(0, "actual_qd_2").unwrap();
+        assert!(qd_2 == 0.0 && qd_2.is_sign_negative());
+
+        let mut state = RobotState::default();
+        trace.fill_state(0, &mut state).unwrap();
+        assert_eq!(state.timestamp_s, 4029.5389999999998);
+        assert_eq!(state.actual_q[1], -1.5707534360957034);
+        assert_eq!(state.runtime_state, runtime_state::PAUSED);
+        assert_eq!(state.robot_mode, 7);
+        assert_eq!(state.safety_mode, 1, "from the `safety_status` column");
+        assert_eq!(state.speed_scaling, 0.0);
+        assert!(matches!(
+            trace.fill_state(256, &mut state),
+            Err(RobotIoError::TraceRowOutOfRange {
+                row: 256,
+                rows: 256
+            })
+        ));
+    }
+
+    #[test]
+    fn rad_segments_keep_leading_columns_and_join_without_gaps() {
+        let mut last: Option<f64> = None;
+        for (name, ..) in REAL_TRACES.iter().skip(1) {
+            let trace = Trace::read(data(name)).unwrap();
+            assert_eq!(trace.leading_names(), ["time", "_id"]);
+            assert_eq!(trace.leading_value(0, "time"), Some("1"));
+            assert!(
+                trace
+                    .leading_value(0, "_id")
+                    .unwrap()
+                    .starts_with("2021:10:05:12:08:")
+            );
+            let first = trace.timestamp(0).unwrap();
+            if let Some(prev) = last {
+                assert!(
+                    (first - prev - 0.04).abs() < 1e-6,
+                    "{name}: {prev} -> {first}"
+                );
+            }
+            last = trace.timestamp(trace.len() - 1);
+            // The controller reports speed_scaling 0 exactly when the program is not playing.
+            for r in 0..trace.len() {
+                let rs = trace.value(r, "runtime_state").unwrap();
+                let ss = trace.value(r, "speed_scaling").unwrap();
+                assert_eq!(ss == 0.0, rs != 2.0, "{name} row {r}");
+            }
+        }
+    }
+
+    #[test]
+    fn duplicates_are_dropped_and_gaps_reported() {
+        // Simulated 500 Hz recording: rows 2 and 5 repeat a timestamp, 3 cycles are missing
+        // after 0.006 s, 1 after 0.014 s.
+        let text = "timestamp,actual_q_0\n\
+                    0.000,0\n0.002,1\n0.002,1\n0.004,2\n0.006,3\n0.006,3\n\
+                    0.014,4\n0.016,5\n0.020,6\n0.022,7\n";
+        let trace = Trace::parse(text, "sim.csv").unwrap();
+        assert_eq!(trace.len(), 8);
+        let q: Vec<f64> = (0..8)
+            .map(|r| trace.value(r, "actual_q_0").unwrap())
+            .collect();
+        assert_eq!(q, [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
+        let report = trace.report();
+        assert_eq!(report.rows, 8);
+        assert_eq!(report.duplicates_removed, 2);
+        assert!((report.nominal_period_s.unwrap() - 0.002).abs() < 1e-12);
+        assert_eq!(report.gaps.len(), 2);
+        assert_eq!(report.gaps[0].after_row, 3);
+        assert_eq!(report.gaps[0].after_timestamp, 0.006);
+        assert_eq!(report.gaps[0].missing_periods, 3);
+        assert_eq!(report.gaps[1].after_timestamp, 0.016);
+        assert_eq!(report.gaps[1].missing_periods, 1);
+        assert_eq!(report.missing_periods(), 4);
+    }
+
+    #[test]
+    fn line_endings_blank_lines_bom_and_whitespace_runs() {
+        let lf = "timestamp a\n0.1 1\n0.2 2\n";
+        let crlf = "\u{feff}timestamp a\r\n0.1 1\r\n\r\n0.2 2\r\n";
+        let cr = "timestamp  a\r0.1\t1\r0.2   2";
+        for text in [lf, crlf, cr] {
+            let trace = Trace::parse(text, "t").unwrap();
+            assert_eq!(trace.len(), 2, "{text:?}");
+            assert_eq!(trace.value(1, "a"), Some(2.0));
+        }
+        // Line numbers count CR-only line ends.
+        let (line, column, ..) = parse_err("timestamp,a\r0.1,1\r0.2,x\r");
+        assert_eq!((line, column), (3, 2));
+    }
+
+    #[test]
+    fn malformed_input_names_file_line_and_column() {
+        let (line, column, kind, msg) = parse_err("timestamp,a,b\n0.0,1,2\n0.1,1,oops\n");
+        assert_eq!((line, column), (3, 3));
+        assert_eq!(
+            kind,
+            TraceParseErrorKind::NotANumber {
+                field: "b".into(),
+                text: "oops".into()
+            }
+        );
+        assert_eq!(msg, "bad.csv:3:3: field `b`: `oops` is not a number");
+
+        let (line, column, kind, _) = parse_err("timestamp,a,b\n0.0,1\n");
+        assert_eq!((line, column), (2, 3));
+        assert_eq!(
+            kind,
+            TraceParseErrorKind::ColumnCount {
+                expected: 3,
+                found: 2
+            }
+        );
+        let (line, column, ..) = parse_err("timestamp,a\n0.0,1,5\n");
+        assert_eq!((line, column), (2, 3));
+
+        let (line, column, kind, _) = parse_err("time,a\n0,1\n");
+        assert_eq!(
+            (line, column, kind),
+            (1, 1, TraceParseErrorKind::MissingTimestamp)
+        );
+
+        let (line, column, kind, _) = parse_err("timestamp,a,a\n");
+        assert_eq!((line, column), (1, 3));
+        assert_eq!(
+            kind,
+            TraceParseErrorKind::DuplicateColumn { name: "a".into() }
+        );
+
+        let (line, column, kind, _) = parse_err("x,timestamp,a\nid,0.2,1\nid,0.1,1\n");
+        assert_eq!((line, column), (3, 2));
+        assert_eq!(
+            kind,
+            TraceParseErrorKind::TimestampDecreasing {
+                previous: 0.2,
+                found: 0.1
+            }
+        );
+
+        let (line, column, kind, _) = parse_err("timestamp,a\nnan,1\n");
+        assert_eq!((line, column), (2, 1));
+        assert!(matches!(
+            kind,
+            TraceParseErrorKind::TimestampNotFinite { .. }
+        ));
+
+        // 2^53 is exact; 2^53 + 1 is not.
+        let ok = Trace::parse("timestamp,bits\n0,9007199254740992\n", "t").unwrap();
+        assert_eq!(ok.value(0, "bits"), Some(9_007_199_254_740_992.0));
+        let (line, column, kind, _) = parse_err("timestamp,bits\n0,9007199254740993\n");
+        assert_eq!((line, column), (2, 2));
+        assert!(matches!(kind, TraceParseErrorKind::IntegerTooLarge { .. }));
+        let (.., kind, _) =
+            parse_err("timestamp,bits\n0,-18446744073709551615000000000000000000000\n");
+        assert!(matches!(kind, TraceParseErrorKind::IntegerTooLarge { .. }));
+
+        let (line, column, kind, _) = parse_err("\n\n");
+        assert_eq!((line, column, kind), (1, 1, TraceParseErrorKind::Empty));
+    }
+
+    #[test]
+    fn read_names_the_file_and_reports_io_and_utf8_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("broken.csv");
+        std::fs::write(&path, b"timestamp,a\n0,1\n0.1,\xff\n").unwrap();
+        let err = Trace::read(&path).unwrap_err();
+        let RobotIoError::TraceParse {
+            file, line, kind, ..
+        } = &err
+        else {
+            panic!("{err:?}")
+        };
+        assert_eq!(file, &path);
+        assert_eq!(*line, 3);
+        assert_eq!(kind, &TraceParseErrorKind::NotUtf8);
+        assert!(err.to_string().contains("broken.csv:3:"));
+
+        let missing = Trace::read(dir.path().join("missing.csv")).unwrap_err();
+        assert!(matches!(missing, RobotIoError::Io { .. }));
+        assert!(missing.to_string().contains("missing.csv"));
+    }
+
+    fn assert_bit_identical(a: &Trace, b: &Trace) {
+        assert_eq!(a.field_names(), b.field_names());
+        assert_eq!(a.len(), b.len());
+        for r in 0..a.len() {
+            for (x, y) in a.row(r).unwrap().iter().zip(b.row(r).unwrap()) {
+                assert_eq!(x.to_bits(), y.to_bits(), "row {r}: {x:?} vs {y:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn real_traces_round_trip_bit_exact_in_both_dialects() {
+        let dir = tempfile::tempdir().unwrap();
+        for (name, ..) in REAL_TRACES {
+            let trace = Trace::read(data(name)).unwrap();
+            for (options, dialect) in [
+                (WriteOptions::ur_rtde(), Dialect::Comma),
+                (WriteOptions::record_py(), Dialect::Space),
+            ] {
+                let path = dir.path().join(format!("{name}.{dialect:?}.csv"));
+                trace.write(&path, &options).unwrap();
+                let back = Trace::read(&path).unwrap();
+                assert_eq!(back.dialect(), dialect);
+                assert_bit_identical(&trace, &back);
+            }
+        }
+    }
+
+    #[test]
+    fn awkward_values_round_trip_bit_exact() {
+        let specials = [
+            -0.0,
+            0.0,
+            0.1 + 0.2,
+            f64::MIN_POSITIVE,
+            5e-324,
+            1e-300,
+            f64::MAX,
+            -f64::MAX,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            9_007_199_254_740_992.0,
+            -9_007_199_254_740_991.0,
+            1e22,
+            std::f64::consts::PI,
+            4029.5389999999998,
+            7.0,
+        ];
+        let mut trace = Trace::new(["timestamp", "v"]).unwrap();
+        for (i, v) in specials.iter().enumerate() {
+            trace.push_row(&[i as f64 * 0.002, *v]).unwrap();
+        }
+        trace.push_row(&[1.0, f64::NAN]).unwrap();
+        for options in [WriteOptions::ur_rtde(), WriteOptions::record_py()] {
+            let mut buf = Vec::new();
+            trace.write_to(&mut buf, &options).unwrap();
+            let back = Trace::parse(std::str::from_utf8(&buf).unwrap(), "mem").unwrap();
+            assert_bit_identical(&trace, &back);
+        }
+    }
+
+    #[test]
+    fn writers_produce_the_two_dialects() {
+        let mut trace = Trace::new(["timestamp", "actual_q_0", "runtime_state"]).unwrap();
+        trace.push_row(&[0.002, -1.5, 2.0]).unwrap();
+        trace.push_row(&[0.004, 0.25, 4.0]).unwrap();
+        let mut comma = Vec::new();
+        trace
+            .write_to(&mut comma, &WriteOptions::ur_rtde())
+            .unwrap();
+        assert_eq!(
+            String::from_utf8(comma).unwrap(),
+            "timestamp,actual_q_0,runtime_state\n0.002,-1.5,2\n0.004,0.25,4\n"
+        );
+        let mut space = Vec::new();
+        trace
+            .write_to(&mut space, &WriteOptions::record_py())
+            .unwrap();
+        assert_eq!(
+            String::from_utf8(space).unwrap(),
+            "timestamp actual_q_0 runtime_state\n0.002 -1.5 2\n0.004 0.25 4\n"
+        );
+        let mut fixed = Vec::new();
+        let options = WriteOptions {
+            dialect: Dialect::Comma,
+            float_format: FloatFormat::Fixed(6),
+        };
+        trace.write_to(&mut fixed, &options).unwrap();
+        assert_eq!(
+            String::from_utf8(fixed).unwrap(),
+            "timestamp,actual_q_0,runtime_state\n\
+             0.002000,-1.500000,2.000000\n0.004000,0.250000,4.000000\n"
+        );
+    }
+
+    #[test]
+    fn streaming_writer_checks_row_length_and_counts_rows() {
+        let mut writer =
+            TraceWriter::new(Vec::new(), &["timestamp", "a"], &WriteOptions::ur_rtde()).unwrap();
+        writer.write_row(&[0.0, 1.0]).unwrap();
+        assert!(matches!(
+            writer.write_row(&[0.0]),
+            Err(RobotIoError::TraceRowLength {
+                expected: 2,
+                found: 1
+            })
+        ));
+        writer.flush().unwrap();
+        assert_eq!(writer.rows_written(), 1);
+        assert_eq!(writer.into_inner(), b"timestamp,a\n0,1\n");
+    }
+
+    #[test]
+    fn state_rows_round_trip_through_a_file() {
+        let state = RobotState {
+            timestamp_s: 12.346,
+            actual_q: [0.1, -1.2, 1.3, -0.4, 0.5, -0.6],
+            actual_qd: [0.01, 0.02, -0.03, 0.0, -0.0, 0.06],
+            target_q: [0.11, -1.21, 1.31, -0.41, 0.51, -0.61],
+            target_qd: [1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+            actual_tcp_pose: [-0.1, -0.2, 0.3, 3.1, 0.2, -0.1],
+            actual_tcp_speed: [0.001, 0.0, 0.0, 0.0, 0.0, 0.5],
+            speed_scaling: 0.75,
+            target_speed_fraction: 0.5,
+            robot_mode: 7,
+            safety_mode: 3,
+            runtime_state: 4,
+            robot_status_bits: 3,
+            safety_status_bits: 1 << 2 | 1 << 10,
+        };
+        let mut row = [0.0; 44];
+        state_to_row(&state, &mut row);
+        let mut trace = Trace::new(STATE_FIELD_NAMES).unwrap();
+        trace.push_row(&row).unwrap();
+        let mut buf = Vec::new();
+        trace.write_to(&mut buf, &WriteOptions::ur_rtde()).unwrap();
+        let back = Trace::parse(std::str::from_utf8(&buf).unwrap(), "mem").unwrap();
+        let mut out = RobotState::default();
+        back.fill_state(0, &mut out).unwrap();
+        assert_eq!(out, state);
+        assert!(out.actual_qd[4].is_sign_negative());
+    }
+
+    #[test]
+    fn building_editing_and_seeking() {
+        assert!(matches!(
+            Trace::new(["a", "timestamp"]),
+            Err(RobotIoError::TraceUnknownField { .. })
+        ));
+        assert!(matches!(
+            Trace::new(["timestamp", "a", "a"]),
+            Err(RobotIoError::TraceDuplicateField { .. })
+        ));
+        let mut trace = Trace::new(["timestamp", "safety_mode"]).unwrap();
+        assert!(trace.is_empty());
+        assert_eq!(trace.report().nominal_period_s, None);
+        trace.push_row(&[1.0, 1.0]).unwrap();
+        trace.push_row(&[1.002, 1.0]).unwrap();
+        assert!(matches!(
+            trace.push_row(&[1.002, 1.0]),
+            Err(RobotIoError::TraceTimestampOrder { .. })
+        ));
+        assert!(matches!(
+            trace.push_row(&[1.004]),
+            Err(RobotIoError::TraceRowLength { .. })
+        ));
+        trace.set_value(1, "safety_mode", 3.0).unwrap();
+        assert_eq!(trace.value(1, "safety_mode"), Some(3.0));
+        assert!(trace.set_value(1, "timestamp", 0.0).is_err());
+        assert!(matches!(
+            trace.set_value(2, "safety_mode", 3.0),
+            Err(RobotIoError::TraceRowOutOfRange { row: 2, rows: 2 })
+        ));
+        assert_eq!(trace.row_at_time(0.5), None);
+        assert_eq!(trace.row_at_time(1.0), Some(0));
+        assert_eq!(trace.row_at_time(1.0019), Some(0));
+        assert_eq!(trace.row_at_time(1.002), Some(1));
+        assert_eq!(trace.row_at_time(99.0), Some(1));
+        assert_eq!(trace.value_at(0, 2), None);
+        assert_eq!(trace.row(2), None);
+    }
+}
