@@ -40,7 +40,7 @@
 //! # Program, safety and injected faults
 //! - `runtime_state`: [`SimRobot::pause`] gives PAUSING while the arm brakes at `max_acc`, then
 //!   PAUSED; [`SimRobot::stop_program`] gives STOPPING then STOPPED; [`SimRobot::play`] gives
-//!   RESUMING for one cycle (from PAUSED) and then PLAYING.
+//!   RESUMING for one published cycle (from PAUSED) and then PLAYING.
 //! - [`SimRobot::inject_protective_stop`]: `safety_mode` PROTECTIVE_STOP, `safety_status_bits`
 //!   bits 2 (protective stop) and 10 (stopped due to safety); the arm brakes at
 //!   `safety_stop_decel_rad_s2` and the program pauses. [`SimRobot::clear_protective_stop`]
@@ -263,6 +263,8 @@ pub struct SimRobot {
     safety_mode: i32,
     safety_status_bits: u32,
     runtime_state: u32,
+    /// Steps left in RESUMING before PLAYING.
+    resume_left: u32,
     /// Steps left during which the published state is frozen.
     dropped_remaining: u64,
     ignored_commands: u64,
@@ -314,6 +316,7 @@ impl SimRobot {
             safety_mode: safety_mode::NORMAL,
             safety_status_bits: BIT_NORMAL_MODE,
             runtime_state: runtime_state::PLAYING,
+            resume_left: 0,
             dropped_remaining: 0,
             ignored_commands: 0,
             state: RobotState::default(),
@@ -355,6 +358,7 @@ impl SimRobot {
         // Program state transitions that depend on the arm standing still.
         let at_rest = self.joints.iter().all(|j| j.qd == 0.0);
         match self.runtime_state {
+            runtime_state::RESUMING if self.resume_left > 0 => self.resume_left -= 1,
             runtime_state::RESUMING => self.runtime_state = runtime_state::PLAYING,
             runtime_state::PAUSING if at_rest => self.runtime_state = runtime_state::PAUSED,
             runtime_state::STOPPING if at_rest => self.runtime_state = runtime_state::STOPPED,
@@ -460,7 +464,10 @@ impl SimRobot {
             return false;
         }
         match self.runtime_state {
-            runtime_state::PAUSED => self.runtime_state = runtime_state::RESUMING,
+            runtime_state::PAUSED => {
+                self.runtime_state = runtime_state::RESUMING;
+                self.resume_left = 1;
+            }
             runtime_state::STOPPED => self.runtime_state = runtime_state::PLAYING,
             runtime_state::PLAYING | runtime_state::RESUMING => {}
             _ => return false,
@@ -898,4 +905,567 @@ pub fn ur5e_tcp_pose(q: &Joints) -> [f64; 6] {
     let (rot, pos) = ur5e_tcp_transform(q);
     let rv = rotation_vector(&rot);
     [pos[0], pos[1], pos[2], rv[0], rv[1], rv[2]]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::trace::Trace;
+
+    const HOME: Joints = [0.0, -FRAC_PI_2, 0.0, -FRAC_PI_2, 0.0, 0.0];
+
+    fn robot() -> SimRobot {
+        SimRobot::new(SimConfig::ur5e()).unwrap()
+    }
+
+    fn read(robot: &mut SimRobot) -> RobotState {
+        let mut s = RobotState::default();
+        robot.read_state(&mut s).unwrap();
+        s
+    }
+
+    fn run(robot: &mut SimRobot, cycles: usize) {
+        for _ in 0..cycles {
+            robot.step();
+        }
+    }
+
+    fn speed(qd0: f64, acc: f64) -> JointCommand {
+        JointCommand::Speed {
+            qd: [qd0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            acc,
+        }
+    }
+
+    #[test]
+    fn fk_all_zeros_matches_hand_derivation() {
+        // By hand: x = a2 + a3, y = −(d4 + d6), z = d1 − d5; flange rotated +90° about x.
+        let pose = ur5e_tcp_pose(&[0.0; 6]);
+        let expected = [-0.8172, -0.2329, 0.0628, FRAC_PI_2, 0.0, 0.0];
+        for (p, e) in pose.iter().zip(expected) {
+            assert!((p - e).abs() < 1e-12, "{pose:?}");
+        }
+    }
+
+    #[test]
+    fn fk_matches_a_real_ur5e_at_home() {
+        // The record.py recording (a real e-Series arm at the upright home pose): its
+        // controller-computed actual_TCP_pose agrees with the nominal DH model within the arm's
+        // calibration (about 1 mm).
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../data/rtde-traces/eseries_10hz_recordpy_paused.csv");
+        let trace = Trace::read(path).unwrap();
+        let mut state = RobotState::default();
+        trace.fill_state(0, &mut state).unwrap();
+        let (rot, pos) = ur5e_tcp_transform(&state.actual_q);
+        for (p, r) in pos.iter().zip(&state.actual_tcp_pose) {
+            assert!(
+                (p - r).abs() < 2e-3,
+                "{pos:?} vs {:?}",
+                state.actual_tcp_pose
+            );
+        }
+        // Compare orientations as matrices (a rotation vector near π is sign-ambiguous).
+        let recorded = rotation_matrix(&[
+            state.actual_tcp_pose[3],
+            state.actual_tcp_pose[4],
+            state.actual_tcp_pose[5],
+        ]);
+        let diff = rotation_vector(&mat_mul(&rot, &transpose(&recorded)));
+        let angle = diff.iter().map(|d| d * d).sum::<f64>().sqrt();
+        assert!(angle < 5e-3, "orientation differs by {angle} rad");
+    }
+
+    /// Rodrigues' formula, for the tests.
+    fn rotation_matrix(rv: &[f64; 3]) -> Mat3 {
+        let angle = (rv[0] * rv[0] + rv[1] * rv[1] + rv[2] * rv[2]).sqrt();
+        let k = [rv[0] / angle, rv[1] / angle, rv[2] / angle];
+        let (s, c) = angle.sin_cos();
+        let t = 1.0 - c;
+        [
+            [
+                c + k[0] * k[0] * t,
+                k[0] * k[1] * t - k[2] * s,
+                k[0] * k[2] * t + k[1] * s,
+            ],
+            [
+                k[1] * k[0] * t + k[2] * s,
+                c + k[1] * k[1] * t,
+                k[1] * k[2] * t - k[0] * s,
+            ],
+            [
+                k[2] * k[0] * t - k[1] * s,
+                k[2] * k[1] * t + k[0] * s,
+                c + k[2] * k[2] * t,
+            ],
+        ]
+    }
+
+    #[test]
+    fn rotation_vector_round_trips_including_near_pi() {
+        for rv in [
+            [0.0, 0.0, 0.0],
+            [1e-9, 0.0, 0.0],
+            [0.3, -0.2, 0.1],
+            [0.0, -2.2187278258508263, 2.2193870835226552],
+            [PI, 0.0, 0.0],
+            [0.0, 0.0, -(PI - 1e-6)],
+        ] {
+            if rv == [0.0; 3] {
+                assert_eq!(rotation_vector(&IDENTITY), [0.0; 3]);
+                continue;
+            }
+            let back = rotation_matrix(&rotation_vector(&rotation_matrix(&rv)));
+            let original = rotation_matrix(&rv);
+            for (a, b) in back.iter().flatten().zip(original.iter().flatten()) {
+                assert!((a - b).abs() < 1e-9, "{rv:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn starts_at_rest_in_a_sane_state() {
+        let mut r = robot();
+        let s = read(&mut r);
+        assert_eq!(s.timestamp_s, 0.0);
+        assert_eq!(s.actual_q, HOME);
+        assert_eq!(s.robot_mode, robot_mode::RUNNING);
+        assert_eq!(s.safety_mode, safety_mode::NORMAL);
+        assert_eq!(s.runtime_state, runtime_state::PLAYING);
+        assert!(!s.is_safety_stopped());
+        assert!(
+            (s.actual_tcp_pose[2] - 1.0794).abs() < 1e-12,
+            "{:?}",
+            s.actual_tcp_pose
+        );
+    }
+
+    #[test]
+    fn timestamp_advances_2ms_per_step_and_read_does_not_advance() {
+        let mut config = SimConfig::ur5e();
+        config.initial_timestamp_s = 100.0;
+        let mut r = SimRobot::new(config).unwrap();
+        run(&mut r, 3);
+        assert_eq!(read(&mut r).timestamp_s, 100.006);
+        assert_eq!(read(&mut r).timestamp_s, 100.006);
+        run(&mut r, 50_000 - 3);
+        // Computed from the cycle count: no drift after 100 s.
+        assert!((read(&mut r).timestamp_s - 200.0).abs() < 1e-12);
+        assert_eq!(r.cycles(), 50_000);
+    }
+
+    #[test]
+    fn servoj_step_converges_within_velocity_and_acceleration_limits() {
+        let mut r = robot();
+        let mut target = HOME;
+        target[0] += 0.5;
+        target[2] -= 0.3;
+        let cmd = JointCommand::Servo {
+            q: target,
+            lookahead_s: 0.1,
+            gain: 300.0,
+        };
+        let mut prev = read(&mut r);
+        let mut peak: f64 = 0.0;
+        for cycle in 0..2000 {
+            r.send(&cmd).unwrap();
+            r.step();
+            let s = read(&mut r);
+            for j in 0..6 {
+                assert!(s.actual_qd[j].abs() <= PI + 1e-9, "cycle {cycle}");
+                let acc = (s.actual_qd[j] - prev.actual_qd[j]) / CYCLE_S;
+                assert!(acc.abs() <= PI + 1e-6, "cycle {cycle} joint {j}: {acc}");
+                // Joint 0 never passes the target (no overshoot beyond numerical noise).
+                assert!(s.actual_q[0] <= target[0] + 1e-4);
+            }
+            peak = peak.max(s.actual_qd[0].abs());
+            prev = s;
+        }
+        for ((q, t), qd) in prev.actual_q.iter().zip(target).zip(prev.actual_qd) {
+            assert!((q - t).abs() < 1e-6, "{:?}", prev.actual_q);
+            assert!(qd.abs() < 1e-6);
+        }
+        assert!(peak > 0.3, "the move actually used speed: {peak}");
+    }
+
+    #[test]
+    fn servoj_gain_and_lookahead_shape_the_response() {
+        // Distance covered in 0.1 s towards a small step (well inside the limits).
+        let covered = |lookahead_s, gain| {
+            let mut r = robot();
+            let mut q = HOME;
+            q[5] += 0.01;
+            r.send(&JointCommand::Servo {
+                q,
+                lookahead_s,
+                gain,
+            })
+            .unwrap();
+            run(&mut r, 50);
+            read(&mut r).actual_q[5]
+        };
+        assert!(covered(0.03, 2000.0) > covered(0.03, 100.0));
+        assert!(covered(0.03, 300.0) > covered(0.2, 300.0));
+    }
+
+    #[test]
+    fn speedj_ramps_at_the_commanded_acceleration() {
+        let mut r = robot();
+        r.send(&speed(0.5, 1.0)).unwrap();
+        let mut prev = read(&mut r);
+        for cycle in 1..=250 {
+            r.step();
+            let s = read(&mut r);
+            let acc = (s.actual_qd[0] - prev.actual_qd[0]) / CYCLE_S;
+            assert!((acc - 1.0).abs() < 1e-6, "cycle {cycle}: {acc}");
+            prev = s;
+        }
+        assert!((prev.actual_qd[0] - 0.5).abs() < 1e-9);
+        run(&mut r, 10);
+        let s = read(&mut r);
+        assert!((s.actual_qd[0] - 0.5).abs() < 1e-12);
+        assert_eq!(s.actual_qd[1], 0.0);
+        // Acceleration above the limit is capped at π rad/s².
+        let mut r = robot();
+        r.send(&speed(3.0, 50.0)).unwrap();
+        r.step();
+        assert!((read(&mut r).actual_qd[0] - PI * CYCLE_S).abs() < 1e-12);
+    }
+
+    #[test]
+    fn speedj_keeps_direction_when_capped_and_leading_axis_sets_the_ramp() {
+        let mut r = robot();
+        r.send(&JointCommand::Speed {
+            qd: [6.0, -3.0, 0.0, 0.0, 0.0, 0.0],
+            acc: 3.0,
+        })
+        .unwrap();
+        run(&mut r, 1);
+        let s = read(&mut r);
+        assert!((s.actual_qd[0] - 3.0 * CYCLE_S).abs() < 1e-12);
+        assert!((s.actual_qd[1] + 1.5 * CYCLE_S).abs() < 1e-12);
+        // 1.2 s: past the 1.05 s ramp, short of the joint limit.
+        run(&mut r, 600);
+        let s = read(&mut r);
+        assert!((s.actual_qd[0] - PI).abs() < 1e-9, "{:?}", s.actual_qd);
+        assert!((s.actual_qd[1] + PI / 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn stopj_decelerates_at_its_deceleration_all_joints_together() {
+        let mut r = robot();
+        r.send(&JointCommand::Speed {
+            qd: [1.0, 0.5, 0.0, 0.0, 0.0, 0.0],
+            acc: PI,
+        })
+        .unwrap();
+        run(&mut r, 500);
+        r.send(&JointCommand::Stop { decel: 2.0 }).unwrap();
+        let mut prev = read(&mut r);
+        let mut cycles = 0;
+        while read(&mut r).actual_qd[0] != 0.0 {
+            r.step();
+            let s = read(&mut r);
+            let decel = (prev.actual_qd[0] - s.actual_qd[0]) / CYCLE_S;
+            assert!(decel <= 2.0 + 1e-9);
+            // Joints stay in proportion: joint 1 runs at half of joint 0 all the way down.
+            assert!((s.actual_qd[1] - s.actual_qd[0] / 2.0).abs() < 1e-12);
+            prev = s;
+            cycles += 1;
+        }
+        assert_eq!(cycles, 250, "1 rad/s at 2 rad/s² takes 0.5 s");
+        assert_eq!(read(&mut r).actual_qd[1], 0.0);
+    }
+
+    #[test]
+    fn protective_stop_halts_and_blocks_commands_until_cleared_and_played() {
+        let mut r = robot();
+        r.send(&speed(1.0, PI)).unwrap();
+        run(&mut r, 500);
+        r.inject_protective_stop();
+        run(&mut r, 1);
+        let s = read(&mut r);
+        assert_eq!(s.safety_mode, safety_mode::PROTECTIVE_STOP);
+        assert_ne!(
+            s.safety_status_bits & safety_status_bits::PROTECTIVE_STOP,
+            0
+        );
+        assert_ne!(
+            s.safety_status_bits & safety_status_bits::STOPPED_DUE_TO_SAFETY,
+            0
+        );
+        assert!(s.is_safety_stopped());
+        // Braking at the safety deceleration: 1 rad/s at 2π rad/s² stops within 0.16 s.
+        run(&mut r, 80);
+        let stopped = read(&mut r);
+        assert_eq!(stopped.actual_qd, [0.0; 6]);
+        assert_eq!(stopped.runtime_state, runtime_state::PAUSED);
+        assert_eq!(stopped.speed_scaling, 0.0);
+        // Commands are ignored and nothing moves.
+        r.send(&speed(1.0, PI)).unwrap();
+        run(&mut r, 100);
+        assert_eq!(read(&mut r).actual_q, stopped.actual_q);
+        assert_eq!(r.ignored_commands(), 1);
+        assert!(!r.play(), "play is refused during a protective stop");
+        // Unlock, then play: commands act again.
+        assert!(r.clear_protective_stop());
+        assert!(!r.clear_protective_stop());
+        let s = {
+            run(&mut r, 1);
+            read(&mut r)
+        };
+        assert_eq!(s.safety_mode, safety_mode::NORMAL);
+        assert!(!s.is_safety_stopped());
+        assert_eq!(s.runtime_state, runtime_state::PAUSED);
+        assert!(r.play());
+        run(&mut r, 1);
+        assert_eq!(read(&mut r).runtime_state, runtime_state::RESUMING);
+        run(&mut r, 1);
+        assert_eq!(read(&mut r).runtime_state, runtime_state::PLAYING);
+        // The command sent during the stop was discarded: the arm stays still.
+        run(&mut r, 10);
+        assert_eq!(read(&mut r).actual_q, stopped.actual_q);
+        r.send(&speed(1.0, PI)).unwrap();
+        run(&mut r, 10);
+        assert!(read(&mut r).actual_q[0] > stopped.actual_q[0]);
+    }
+
+    #[test]
+    fn emergency_stop_powers_off_and_needs_the_full_recovery() {
+        let mut r = robot();
+        r.send(&speed(0.5, PI)).unwrap();
+        run(&mut r, 200);
+        r.inject_emergency_stop();
+        assert!(!r.clear_emergency_stop(), "still moving");
+        run(&mut r, 100);
+        let s = read(&mut r);
+        assert_eq!(s.safety_mode, safety_mode::ROBOT_EMERGENCY_STOP);
+        assert_ne!(s.safety_status_bits & safety_status_bits::EMERGENCY_STOP, 0);
+        assert_eq!(s.actual_qd, [0.0; 6]);
+        assert_eq!(s.robot_mode, robot_mode::POWER_OFF);
+        assert_eq!(s.runtime_state, runtime_state::STOPPED);
+        assert!(!r.power_on(), "refused while e-stopped");
+        assert!(r.clear_emergency_stop());
+        assert!(!r.brake_release());
+        assert!(r.power_on());
+        assert!(!r.play(), "brakes still engaged");
+        assert!(r.brake_release());
+        assert!(r.play());
+        r.send(&speed(0.5, PI)).unwrap();
+        run(&mut r, 10);
+        let s = read(&mut r);
+        assert_eq!(s.runtime_state, runtime_state::PLAYING);
+        assert!(s.actual_qd[0] > 0.0);
+    }
+
+    #[test]
+    fn dropped_cycles_freeze_the_published_state() {
+        let mut r = robot();
+        r.send(&speed(0.5, PI)).unwrap();
+        run(&mut r, 10);
+        let before = read(&mut r);
+        r.inject_dropped_cycles(5);
+        for _ in 0..5 {
+            r.step();
+            let s = read(&mut r);
+            assert_eq!(s, before, "stale state while cycles are dropped");
+        }
+        // The model kept moving underneath.
+        assert!(r.state().actual_q[0] > before.actual_q[0]);
+        r.step();
+        let after = read(&mut r);
+        assert!((after.timestamp_s - before.timestamp_s - 6.0 * CYCLE_S).abs() < 1e-12);
+        assert_eq!(after, *r.state());
+    }
+
+    #[test]
+    fn speed_scaling_half_halves_the_speed() {
+        let steady = |scaling: f64, fraction: f64| {
+            let mut r = robot();
+            r.set_speed_scaling(scaling).unwrap();
+            r.set_target_speed_fraction(fraction).unwrap();
+            r.send(&speed(1.0, PI)).unwrap();
+            run(&mut r, 1000);
+            let s = read(&mut r);
+            assert_eq!(s.speed_scaling, scaling);
+            assert_eq!(s.target_speed_fraction, fraction);
+            s.actual_qd[0]
+        };
+        assert!((steady(1.0, 1.0) - 1.0).abs() < 1e-12);
+        assert!((steady(0.5, 1.0) - 0.5).abs() < 1e-12);
+        assert!((steady(1.0, 0.5) - 0.5).abs() < 1e-12);
+        assert!((steady(0.5, 0.5) - 0.25).abs() < 1e-12);
+        assert!(robot().set_speed_scaling(1.5).is_err());
+
+        // servoJ under scaling 0.5: the peak speed of a long move halves (capped at π/2).
+        let peak = |scaling: f64| {
+            let mut r = robot();
+            r.set_speed_scaling(scaling).unwrap();
+            let mut q = HOME;
+            q[0] = 6.0;
+            let cmd = JointCommand::Servo {
+                q,
+                lookahead_s: 0.03,
+                gain: 2000.0,
+            };
+            let mut peak: f64 = 0.0;
+            for _ in 0..4000 {
+                r.send(&cmd).unwrap();
+                r.step();
+                peak = peak.max(read(&mut r).actual_qd[0]);
+            }
+            peak
+        };
+        assert!((peak(1.0) - PI).abs() < 1e-9);
+        assert!((peak(0.5) - PI / 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn pause_and_stop_program_follow_ur_runtime_states() {
+        let mut r = robot();
+        r.send(&speed(1.0, PI)).unwrap();
+        run(&mut r, 400);
+        r.pause();
+        run(&mut r, 1);
+        let s = read(&mut r);
+        assert_eq!(s.runtime_state, runtime_state::PAUSING);
+        assert_eq!(s.speed_scaling, 0.0);
+        assert_eq!(s.robot_status_bits & BIT_PROGRAM_RUNNING, 0);
+        run(&mut r, 400);
+        assert_eq!(read(&mut r).runtime_state, runtime_state::PAUSED);
+        assert_eq!(read(&mut r).actual_qd, [0.0; 6]);
+        r.stop_program();
+        run(&mut r, 1);
+        assert_eq!(read(&mut r).runtime_state, runtime_state::STOPPED);
+        assert!(r.play());
+        run(&mut r, 1);
+        let s = read(&mut r);
+        assert_eq!(s.runtime_state, runtime_state::PLAYING);
+        assert_eq!(s.speed_scaling, 1.0);
+        assert_eq!(s.robot_status_bits, BIT_POWER_ON | BIT_PROGRAM_RUNNING);
+    }
+
+    #[test]
+    fn joints_stay_within_position_limits() {
+        let mut r = robot();
+        r.send(&JointCommand::Speed {
+            qd: [PI, PI, -PI, PI, -PI, PI],
+            acc: PI,
+        })
+        .unwrap();
+        let mut max_excursion: f64 = 0.0;
+        for _ in 0..5000 {
+            r.step();
+            let s = read(&mut r);
+            for q in s.actual_q {
+                assert!(q.abs() <= TAU, "{q}");
+                max_excursion = max_excursion.max(q.abs());
+            }
+        }
+        assert!(
+            max_excursion > TAU - 1e-3,
+            "reached the limit: {max_excursion}"
+        );
+        assert_eq!(read(&mut r).actual_qd[0], 0.0, "held at the limit");
+    }
+
+    #[test]
+    fn invalid_commands_and_configs_are_refused() {
+        let mut r = robot();
+        let bad = [
+            JointCommand::Servo {
+                q: [f64::NAN; 6],
+                lookahead_s: 0.1,
+                gain: 300.0,
+            },
+            JointCommand::Servo {
+                q: HOME,
+                lookahead_s: 0.01,
+                gain: 300.0,
+            },
+            JointCommand::Servo {
+                q: HOME,
+                lookahead_s: 0.1,
+                gain: 5000.0,
+            },
+            speed(f64::INFINITY, 1.0),
+            speed(0.1, 0.0),
+            JointCommand::Stop { decel: -1.0 },
+        ];
+        for cmd in bad {
+            assert!(
+                matches!(r.send(&cmd), Err(RobotIoError::InvalidCommand { .. })),
+                "{cmd:?}"
+            );
+        }
+        assert!(r.command().is_none());
+
+        let mut c = SimConfig::ur5e();
+        c.initial_q_rad[3] = 7.0;
+        assert!(matches!(
+            SimRobot::new(c),
+            Err(RobotIoError::InvalidSimConfig {
+                field: "initial_q_rad",
+                ..
+            })
+        ));
+        let mut c = SimConfig::ur5e();
+        c.max_acc_rad_s2[1] = 0.0;
+        assert!(SimRobot::new(c).is_err());
+        let mut c = SimConfig::ur5e();
+        c.min_q_rad[0] = 1.0;
+        c.max_q_rad[0] = -1.0;
+        assert!(SimRobot::new(c).is_err());
+    }
+
+    #[test]
+    fn tcp_speed_matches_the_pose_change() {
+        let mut r = robot();
+        r.send(&speed(0.5, PI)).unwrap();
+        run(&mut r, 300);
+        let a = read(&mut r);
+        r.step();
+        let b = read(&mut r);
+        for k in 0..3 {
+            let fd = (b.actual_tcp_pose[k] - a.actual_tcp_pose[k]) / CYCLE_S;
+            assert!((b.actual_tcp_speed[k] - fd).abs() < 1e-9);
+        }
+        // Rotating the base at 0.5 rad/s turns the flange at 0.5 rad/s about the base z axis.
+        assert!(
+            (b.actual_tcp_speed[5] - 0.5).abs() < 1e-9,
+            "{:?}",
+            b.actual_tcp_speed
+        );
+        assert!(b.actual_tcp_speed[3].abs() < 1e-9 && b.actual_tcp_speed[4].abs() < 1e-9);
+    }
+
+    #[test]
+    fn runs_are_deterministic() {
+        let trial = || {
+            let mut r = robot();
+            let mut log = Vec::new();
+            for i in 0..1500 {
+                let cmd = match i {
+                    0 => Some(speed(0.8, 2.0)),
+                    500 => Some(JointCommand::Stop { decel: 1.5 }),
+                    _ if i > 900 => Some(JointCommand::Servo {
+                        q: [0.3, -1.2, 0.4, -1.5, 0.2, 0.1],
+                        lookahead_s: 0.05,
+                        gain: 500.0,
+                    }),
+                    _ => None,
+                };
+                if let Some(cmd) = cmd {
+                    r.send(&cmd).unwrap();
+                }
+                if i == 700 {
+                    r.inject_dropped_cycles(3);
+                }
+                r.step();
+                log.push(read(&mut r));
+            }
+            log
+        };
+        assert_eq!(trial(), trial());
+    }
 }
