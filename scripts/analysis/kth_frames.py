@@ -281,6 +281,17 @@ def timeline():
     for th in (0.1, 0.2):
         k0 = next(k for k in range(200, n) if speed(P["giver_RHand"], k) > th)
         print(f"  giver RHand speed first > {th} m/s after row 200: row {k0} (t {k0 / HZ:.3f} s)")
+    # runs of the filtered right-hand speed below v_max = 0.10 m/s (rows with a defined speed)
+    runs, start = [], None
+    for k in range(1, n + 1):
+        low = k < n and fspeed["taker_RHand"][k] < 0.10
+        if low and start is None:
+            start = k
+        if not low and start is not None:
+            runs.append((start, k - 1))
+            start = None
+    print("  filtered right-hand speed < 0.10 m/s, runs of >= 0.1 s [rows, t]: " + ", ".join(
+        f"{a}-{b} ({a / HZ:.3f}-{b / HZ:.3f} s, {b - a + 1} rows)" for a, b in runs if b - a + 1 >= 12))
     # head facing statistics in phases
     for lo, hi, label in [(0, 240, "before reach"), (240, grasp, "giver reach -> grasp"), (grasp, release, "grasp -> release"),
                           (release, n, "after release")]:
@@ -288,6 +299,18 @@ def timeline():
         ab = [angle_deg(facing("taker_head", k), sub(P["baton"][k], P["taker_head"][k])) for k in range(lo, hi)]
         print(f"  {label:22s} rows {lo}-{hi - 1}: head(-y) to handover point median {median(a):.1f} deg"
               f" (max {max(a):.1f}); to baton median {median(ab):.1f} deg")
+
+    # the representative centres of config/kth-handover-workspace.toml
+    centres = {"handover": [0.00, -0.17, 1.10], "assembly-table": [0.26, 0.31, 0.82],
+               "tool-storage": [0.65, -0.775, 0.80], "instruction-display": [0.60, 0.825, 1.45]}
+    print("\n== 7. head (-y) angle to each calibrated centre r_i [deg]: min / median / max per phase")
+    for lo, hi, label in [(0, 254, "before reach onset"), (254, release, "onset -> release"), (release, n, "after release"),
+                          (696, n, "baton set down (5.8 s-)")]:
+        parts = []
+        for name, r in centres.items():
+            a = [angle_deg(facing("taker_head", k), sub(r, P["taker_head"][k])) for k in range(lo, hi)]
+            parts.append(f"{name} {min(a):.1f}/{median(a):.1f}/{max(a):.1f}")
+        print(f"  {label:24s} " + " | ".join(parts))
 
 
 if __name__ == "__main__":

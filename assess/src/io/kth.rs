@@ -56,7 +56,7 @@
 //!     first exceeds 0.2 m/s at row 254 (2.117 s): the reach onset. While the baton lay on the
 //!     table that speed stayed ≤ 0.025 m/s; during the reach it peaks at 0.96 m/s;
 //!   - the baton rises to z ≈ 1.10 m by 2.95 s; the taker's right hand arrives there
-//!     (its One-Euro-filtered speed falls below 0.10 m/s at ≈ 3.04 s);
+//!     (its One-Euro-filtered speed stays below 0.10 m/s on rows 364–421, 3.033–3.508 s);
 //!   - 3.300 s (row 396): the taker's |F| first exceeds 5 N (the grasp); the baton is at
 //!     (0.001, −0.173, 1.098) m;
 //!   - 3.558 s (row 427): the giver's |F| falls below 1 N (the release: the transfer is
@@ -97,9 +97,9 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::Vec3;
 use crate::cue::{BodyCue, CueFrame, Hand, HandCue, HeadCue, RobotContext};
 use crate::error::{AssessError, Result};
-use crate::Vec3;
 
 /// The recording rate of the dataset [Hz].
 pub const KTH_RATE_HZ: f64 = 120.0;
@@ -185,7 +185,12 @@ pub fn read_recording(dir: &Path, opts: &KthOptions) -> Result<KthRecording> {
     let l_hand = pose("taker_LHand")?;
     let r_hand = pose("taker_RHand")?;
     let baton = pose("baton")?;
-    let wrench = |name: &str| read_table(&dir.join(format!("Wrench_{name}_saved.csv")), &WRENCH_HEADER);
+    let wrench = |name: &str| {
+        read_table(
+            &dir.join(format!("Wrench_{name}_saved.csv")),
+            &WRENCH_HEADER,
+        )
+    };
     let giver_f = wrench("giver")?;
     let taker_f = wrench("taker")?;
 
@@ -210,12 +215,12 @@ pub fn read_recording(dir: &Path, opts: &KthOptions) -> Result<KthRecording> {
     for k in 0..n {
         let t = k as f64 / opts.rate_hz;
         let mut frame = CueFrame::empty(t);
-        frame.head = rows.head.get(k).and_then(|r| pose_of(r)).map(|(x, q)| HeadCue {
+        frame.head = rows.head.get(k).and_then(pose_of).map(|(x, q)| HeadCue {
             position: x,
             facing: rotate_xyzw(q, FACING_AXIS).unwrap_or(FACING_AXIS),
             confidence: 1.0,
         });
-        frame.body = rows.chest.get(k).and_then(|r| pose_of(r)).map(|(x, q)| {
+        frame.body = rows.chest.get(k).and_then(pose_of).map(|(x, q)| {
             let shoulders = position_of(&rows.l_uarm, k).zip(position_of(&rows.r_uarm, k));
             BodyCue {
                 position: shoulders.map_or(x, |(l, r)| (l + r) / 2.0),
@@ -224,10 +229,11 @@ pub fn read_recording(dir: &Path, opts: &KthOptions) -> Result<KthRecording> {
             }
         });
         for hand in Hand::BOTH {
-            frame.hands[hand as usize] = position_of(&rows.hands[hand as usize], k).map(|x| HandCue {
-                position: x,
-                confidence: 1.0,
-            });
+            frame.hands[hand as usize] =
+                position_of(&rows.hands[hand as usize], k).map(|x| HandCue {
+                    position: x,
+                    confidence: 1.0,
+                });
         }
         let incomplete = release.is_none_or(|r| k < r);
         let collaborating = match opts.collaboration_s {
@@ -255,9 +261,21 @@ pub fn rotate_xyzw(q: [f64; 4], v: Vec3) -> Option<Vec3> {
     let (x, y, z, w) = (x / n, y / n, z / n, w / n);
     // R(q) for the Hamilton quaternion w + xi + yj + zk.
     let r = [
-        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
-        [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
-        [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+        ],
+        [
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+        ],
+        [
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
     ];
     Some(Vec3::new(
         r[0][0] * v.x + r[0][1] * v.y + r[0][2] * v.z,
@@ -271,7 +289,10 @@ fn validate(opts: &KthOptions) -> Result<()> {
         if v.is_finite() && v > 0.0 {
             Ok(())
         } else {
-            Err(AssessError::invalid(key, format!("must be finite and > 0 (got {v})")))
+            Err(AssessError::invalid(
+                key,
+                format!("must be finite and > 0 (got {v})"),
+            ))
         }
     };
     positive("kth.rate_hz", opts.rate_hz)?;
@@ -322,7 +343,11 @@ fn force_of(table: &Table, k: usize) -> Option<f64> {
 }
 
 /// The events, with the rows of the reach onset and the release.
-fn detect_events(rows: &Rows, n: usize, opts: &KthOptions) -> (HandoverEvents, Option<usize>, Option<usize>) {
+fn detect_events(
+    rows: &Rows,
+    n: usize,
+    opts: &KthOptions,
+) -> (HandoverEvents, Option<usize>, Option<usize>) {
     let w = ((opts.speed_window_s * opts.rate_hz).round() as usize).max(1);
     let onset = (1..n).find(|&k| {
         let back = k.saturating_sub(w);
@@ -332,9 +357,11 @@ fn detect_events(rows: &Rows, n: usize, opts: &KthOptions) -> (HandoverEvents, O
             _ => false,
         }
     });
-    let grasp = (0..n).find(|&k| force_of(&rows.taker_f, k).is_some_and(|f| f > opts.grasp_force_n));
-    let release =
-        grasp.and_then(|g| (g..n).find(|&k| force_of(&rows.giver_f, k).is_some_and(|f| f < opts.release_force_n)));
+    let grasp =
+        (0..n).find(|&k| force_of(&rows.taker_f, k).is_some_and(|f| f > opts.grasp_force_n));
+    let release = grasp.and_then(|g| {
+        (g..n).find(|&k| force_of(&rows.giver_f, k).is_some_and(|f| f < opts.release_force_n))
+    });
     let at = release.unwrap_or(n.saturating_sub(1));
     let receiving_hand = position_of(&rows.baton, at).and_then(|b| {
         let d = |h: Hand| position_of(&rows.hands[h as usize], at).map(|p| (p - b).norm());
@@ -375,12 +402,18 @@ fn read_table(path: &Path, header: &[&str]) -> Result<Table> {
         return Err(err(
             1,
             1,
-            format!("expected the header `{}`, found `{first}`", header.join(",")),
+            format!(
+                "expected the header `{}`, found `{first}`",
+                header.join(",")
+            ),
         ));
     }
     let body: Vec<&str> = lines.collect();
     // Trailing empty lines are not rows.
-    let used = body.iter().rposition(|l| !l.trim().is_empty()).map_or(0, |i| i + 1);
+    let used = body
+        .iter()
+        .rposition(|l| !l.trim().is_empty())
+        .map_or(0, |i| i + 1);
     let mut rows = Vec::with_capacity(used);
     for (i, line) in body.iter().take(used).enumerate() {
         let line_no = i + 2;
@@ -435,7 +468,10 @@ mod tests {
         assert!(close(rotate_xyzw(qz, Vec3::x()).unwrap(), Vec3::y()));
         assert!(close(rotate_xyzw(qz, FACING_AXIS).unwrap(), Vec3::x()));
         // 180° about x: (1, 0, 0, 0). ŷ → −ŷ, ẑ → −ẑ.
-        assert!(close(rotate_xyzw([1.0, 0.0, 0.0, 0.0], Vec3::z()).unwrap(), -Vec3::z()));
+        assert!(close(
+            rotate_xyzw([1.0, 0.0, 0.0, 0.0], Vec3::z()).unwrap(),
+            -Vec3::z()
+        ));
         // 120° about (1,1,1)/√3: (x, y, z, w) = (½, ½, ½, ½) cycles x̂ → ŷ → ẑ → x̂.
         let q = [0.5, 0.5, 0.5, 0.5];
         assert!(close(rotate_xyzw(q, Vec3::x()).unwrap(), Vec3::y()));
@@ -483,9 +519,19 @@ mod tests {
             }
             std::fs::write(dir.join(format!("{name}_pose_saved.csv")), s).unwrap();
         };
-        let still = |x: &str| (0..6).map(|_| format!("{x},{IDENTITY}")).collect::<Vec<_>>();
-        pose("taker_head", head_rows.iter().map(|s| s.to_string()).collect());
-        pose("taker_chest", (0..6).map(|_| format!("1,0,1.1,{YAW_90}")).collect());
+        let still = |x: &str| {
+            (0..6)
+                .map(|_| format!("{x},{IDENTITY}"))
+                .collect::<Vec<_>>()
+        };
+        pose(
+            "taker_head",
+            head_rows.iter().map(|s| s.to_string()).collect(),
+        );
+        pose(
+            "taker_chest",
+            (0..6).map(|_| format!("1,0,1.1,{YAW_90}")).collect(),
+        );
         pose("taker_LUArm", still("1,0.2,1.3"));
         pose("taker_RUArm", still("1,-0.2,1.3"));
         pose("taker_LHand", still("0.9,0.3,0.8"));
@@ -493,7 +539,10 @@ mod tests {
         let baton_x = [0.0, 0.0, 0.05, 0.10, 0.15, 0.20];
         pose(
             "baton",
-            baton_x.iter().map(|x| format!("{x},0,1,{IDENTITY}")).collect(),
+            baton_x
+                .iter()
+                .map(|x| format!("{x},0,1,{IDENTITY}"))
+                .collect(),
         );
         let wrench = |name: &str, f: [f64; 6]| {
             let mut s = String::from("Fx,Fy,Fz,Tx,Ty,Tz\n");
@@ -514,7 +563,7 @@ mod tests {
             format!("1,0,1.5,{YAW_90}"),
             // A lost head: empty cells, then NaN.
             ",,,,,,".to_string(),
-            format!("1,0,1.5,NaN,0,0,1"),
+            "1,0,1.5,NaN,0,0,1".to_string(),
             format!("1,0,1.5,{IDENTITY}"),
         ];
         write_folder(&dir, &head.iter().map(String::as_str).collect::<Vec<_>>());
@@ -537,8 +586,14 @@ mod tests {
         let b = f[0].body.unwrap();
         assert!(close(b.position, Vec3::new(1.0, 0.0, 1.3)) && close(b.facing, Vec3::x()));
         // Hands at their own index.
-        assert!(close(f[0].hand(Hand::Left).unwrap().position, Vec3::new(0.9, 0.3, 0.8)));
-        assert!(close(f[0].hand(Hand::Right).unwrap().position, Vec3::new(0.6, -0.1, 1.0)));
+        assert!(close(
+            f[0].hand(Hand::Left).unwrap().position,
+            Vec3::new(0.9, 0.3, 0.8)
+        ));
+        assert!(close(
+            f[0].hand(Hand::Right).unwrap().position,
+            Vec3::new(0.6, -0.1, 1.0)
+        ));
         // Baton speed over round(0.1 s · 10 Hz) = 1 row: 0.5 m/s from row 2 > 0.2 → onset 0.2 s.
         // Taker |F| 6 > 5 N at row 3 → grasp 0.3 s; giver 0.5 < 1 N at row 4 → release 0.4 s.
         assert_eq!(rec.events.reach_onset_s, Some(0.2));
@@ -575,7 +630,9 @@ mod tests {
         let e = read_taker(&dir, &KthOptions::default()).unwrap_err();
         // Data row 3 (0-based) is line 5, after the header and rows 0–2; `zero` is column 2.
         match &e {
-            AssessError::Csv { path, line, column, .. } => {
+            AssessError::Csv {
+                path, line, column, ..
+            } => {
                 assert!(path.ends_with("taker_head_pose_saved.csv"), "{e}");
                 assert_eq!((*line, *column), (5, 2), "{e}");
             }
@@ -587,18 +644,25 @@ mod tests {
         write_folder(&dir, &[ok.as_str(), short, ok.as_str()]);
         let e = read_taker(&dir, &KthOptions::default()).unwrap_err();
         assert!(
-            matches!(&e, AssessError::Csv { line: 3, .. }) && e.to_string().contains("expected 7 fields, found 6"),
+            matches!(&e, AssessError::Csv { line: 3, .. })
+                && e.to_string().contains("expected 7 fields, found 6"),
             "{e}"
         );
 
         write_folder(&dir, &[&ok]);
         std::fs::write(dir.join("Wrench_giver_saved.csv"), "Fx,Fy,Fz\n0,0,0\n").unwrap();
         let e = read_taker(&dir, &KthOptions::default()).unwrap_err();
-        assert!(matches!(&e, AssessError::Csv { line: 1, .. }) && e.to_string().contains("header"), "{e}");
+        assert!(
+            matches!(&e, AssessError::Csv { line: 1, .. }) && e.to_string().contains("header"),
+            "{e}"
+        );
 
         std::fs::remove_file(dir.join("baton_pose_saved.csv")).unwrap();
         let e = read_taker(&dir, &KthOptions::default()).unwrap_err();
-        assert!(matches!(&e, AssessError::Io { .. }) && e.to_string().contains("baton_pose_saved.csv"), "{e}");
+        assert!(
+            matches!(&e, AssessError::Io { .. }) && e.to_string().contains("baton_pose_saved.csv"),
+            "{e}"
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
