@@ -47,14 +47,15 @@
 //! - **The taker receives with the right hand.** The right-hand rigid body's origin (at the
 //!   wrist) comes to 0.21 m from the baton's origin at t ≈ 3.05 s and stays within 0.20–0.23 m
 //!   to the end (last row 0.211 m); the left hand never comes closer than 0.621 m. 0.20–0.21 m is
-//!   the holding distance: the giver's right hand sits at 0.204–0.209 m from the baton while it
+//!   the holding distance: the giver's right hand sits at 0.203–0.207 m from the baton while it
 //!   holds it at the start. With the taker facing −x, their right is +y: the right hand is at
 //!   median y = +0.089, the left at −0.319.
 //! - **The transfer** (rows at 120 Hz):
 //!   - 0–0.8 s: the giver sets the baton down at z ≈ 0.81 m (giver |F| 19 N → 1 N);
 //!   - 2.0 s: the giver grasps it again (|F| 15 N at row 240); the baton's speed over 0.1 s
-//!     first exceeds 0.2 m/s at row 254 (2.117 s): the reach onset. While the baton lay on the
-//!     table that speed stayed ≤ 0.025 m/s; during the reach it peaks at 0.96 m/s;
+//!     first exceeds 0.2 m/s at row 254 (2.117 s): the reach onset. While the giver set it down
+//!     (rows 12–71) that speed stayed ≤ 0.097 m/s, while it lay on the table (rows 72–230)
+//!     ≤ 0.022 m/s; during the reach and transfer it peaks at 0.69 m/s;
 //!   - the baton rises to z ≈ 1.10 m by 2.95 s; the taker's right hand arrives there
 //!     (its One-Euro-filtered speed stays below 0.10 m/s on rows 364–421, 3.033–3.508 s);
 //!   - 3.300 s (row 396): the taker's |F| first exceeds 5 N (the grasp); the baton is at
@@ -119,7 +120,8 @@ pub struct KthOptions {
     /// The interval over which the baton speed is measured for the reach onset [s]. Default 0.1.
     pub speed_window_s: f64,
     /// Reach onset: the baton speed over `speed_window_s` exceeds this [m/s]. Default 0.2
-    /// (the bundled recording: ≤ 0.025 m/s at rest on the table, up to 0.96 m/s in the reach).
+    /// (the bundled recording: ≤ 0.097 m/s as the giver sets it down, ≤ 0.022 m/s at rest on
+    /// the table, up to 0.69 m/s in the reach).
     pub reach_speed_m_s: f64,
     /// Grasp: the taker's force magnitude |F| exceeds this [N]. Default 5 (bundled recording:
     /// ≤ 0.8 N before the transfer, ≈ 30 N while the taker carries the baton).
