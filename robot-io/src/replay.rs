@@ -189,3 +189,124 @@ impl Robot for ReplayRobot {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::types::{runtime_state, safety_mode};
+    use std::path::Path;
+
+    fn rad_segment() -> Trace {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../data/rtde-traces/ur3e_25hz_rad_segment_L2L3.csv");
+        Trace::read(path).unwrap()
+    }
+
+    #[test]
+    fn per_read_plays_every_recorded_row_then_ends() {
+        let trace = rad_segment();
+        let rows = trace.len();
+        let mut robot = ReplayRobot::new(trace.clone());
+        let mut state = RobotState::default();
+        let mut expected = RobotState::default();
+        let mut saw_stopped = false;
+        for r in 0..rows {
+            robot.read_state(&mut state).unwrap();
+            trace.fill_state(r, &mut expected).unwrap();
+            assert_eq!(state, expected, "row {r}");
+            assert_eq!(Some(state.actual_q[0]), trace.value(r, "actual_q_0"));
+            saw_stopped |= state.runtime_state == runtime_state::STOPPED;
+        }
+        assert!(
+            saw_stopped,
+            "this recording has the program stopped for a while"
+        );
+        assert!(!robot.is_finished());
+        let err = robot.read_state(&mut state).unwrap_err();
+        assert!(matches!(err, RobotIoError::TraceEnded { rows: r } if r == rows));
+        assert_eq!(
+            err.to_string(),
+            format!("the replayed trace ended after {rows} rows")
+        );
+        assert!(robot.is_finished());
+        robot.rewind();
+        robot.read_state(&mut state).unwrap();
+        assert_eq!(Some(state.timestamp_s), trace.timestamp(0));
+    }
+
+    #[test]
+    fn clocked_pacing_holds_samples_at_the_requested_rate() {
+        // A 25 Hz recording read at 500 Hz: each sample is held for 20 reads.
+        let trace = rad_segment();
+        let rows = trace.len();
+        let mut robot =
+            ReplayRobot::with_pacing(trace.clone(), Pacing::Clocked { period_s: 0.002 }, 0)
+                .unwrap();
+        let mut state = RobotState::default();
+        let mut reads = 0;
+        let mut changes = 0;
+        let mut last_ts = f64::NAN;
+        while robot.read_state(&mut state).is_ok() {
+            if state.timestamp_s != last_ts {
+                changes += 1;
+                last_ts = state.timestamp_s;
+            }
+            reads += 1;
+        }
+        assert_eq!(changes, rows, "every recorded sample was shown");
+        let span = trace.timestamp(rows - 1).unwrap() - trace.timestamp(0).unwrap();
+        let expected_reads = (span / 0.002).round() as i64 + 1;
+        assert!(
+            (reads - expected_reads).abs() <= 1,
+            "{reads} vs {expected_reads}"
+        );
+        assert_eq!(Some(last_ts), trace.timestamp(rows - 1));
+        assert!(robot.is_finished());
+        assert!(ReplayRobot::with_pacing(trace, Pacing::Clocked { period_s: 0.0 }, 0).is_err());
+    }
+
+    #[test]
+    fn injected_protective_stop_is_replayed_and_missing_fields_keep_defaults() {
+        // A simulated trace without safety fields, with a protective stop injected in row 1.
+        let mut trace = Trace::new(["timestamp", "actual_q_0", "safety_mode"]).unwrap();
+        trace.push_row(&[0.0, 0.1, 1.0]).unwrap();
+        trace.push_row(&[0.002, 0.1, 1.0]).unwrap();
+        trace
+            .set_value(1, "safety_mode", f64::from(safety_mode::PROTECTIVE_STOP))
+            .unwrap();
+        let mut robot = ReplayRobot::new(trace);
+        let mut state = RobotState::default();
+        robot.read_state(&mut state).unwrap();
+        assert!(!state.is_safety_stopped());
+        assert_eq!(state.runtime_state, runtime_state::PLAYING, "default kept");
+        robot.read_state(&mut state).unwrap();
+        assert!(state.is_safety_stopped());
+    }
+
+    #[test]
+    fn send_records_commands_without_moving() {
+        let trace = rad_segment();
+        let mut robot = ReplayRobot::with_pacing(trace, Pacing::PerRead, 2).unwrap();
+        let mut before = RobotState::default();
+        robot.read_state(&mut before).unwrap();
+        let cmds = [
+            JointCommand::Stop { decel: 1.0 },
+            JointCommand::Speed {
+                qd: [0.1; 6],
+                acc: 1.0,
+            },
+            JointCommand::Stop { decel: 2.0 },
+        ];
+        for c in &cmds {
+            robot.send(c).unwrap();
+        }
+        assert_eq!(robot.commands(), &cmds[..2], "kept up to the capacity");
+        assert_eq!(robot.commands_received(), 3);
+        let mut after = RobotState::default();
+        robot.read_state(&mut after).unwrap();
+        assert_eq!(
+            Some(after.actual_q[0]),
+            robot.trace().value(1, "actual_q_0")
+        );
+    }
+}

@@ -1,0 +1,111 @@
+//! `SimRobot::read_state`, `send` and `step` allocate nothing (the control thread's rule).
+//!
+//! A counting global allocator wraps `System`. The switch and the counter are thread-local, so
+//! only the thread under test is counted and tests running in parallel do not disturb it.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use robot_io::sim::{SimConfig, SimRobot};
+use robot_io::{JointCommand, Robot, RobotState};
+
+struct CountingAllocator;
+
+thread_local! {
+    static COUNTING: Cell<bool> = const { Cell::new(false) };
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+}
+
+fn note_allocation() {
+    // `try_with`: thread-locals may be gone during thread teardown.
+    if COUNTING.try_with(Cell::get).unwrap_or(false) {
+        let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
+    }
+}
+
+// SAFETY: defers every operation to `System`; only counts.
+unsafe impl GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note_allocation();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        note_allocation();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note_allocation();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: CountingAllocator = CountingAllocator;
+
+/// Count allocations made by `f` on this thread.
+fn allocations_in(f: impl FnOnce()) -> u64 {
+    let before = ALLOCATIONS.with(Cell::get);
+    COUNTING.with(|c| c.set(true));
+    f();
+    COUNTING.with(|c| c.set(false));
+    ALLOCATIONS.with(Cell::get) - before
+}
+
+#[test]
+fn the_counter_sees_allocations() {
+    let n = allocations_in(|| {
+        let v: Vec<u64> = Vec::with_capacity(16);
+        std::hint::black_box(v);
+    });
+    assert_eq!(n, 1);
+}
+
+#[test]
+fn sim_robot_cycles_allocate_nothing() {
+    let mut robot = SimRobot::new(SimConfig::ur5e()).unwrap();
+    let mut state = RobotState::default();
+    let commands = [
+        JointCommand::Speed {
+            qd: [0.4, -0.3, 0.2, 0.1, -0.1, 0.2],
+            acc: 1.5,
+        },
+        JointCommand::Stop { decel: 2.0 },
+        JointCommand::Servo {
+            q: [0.3, -1.2, 0.4, -1.5, 0.2, 0.1],
+            lookahead_s: 0.1,
+            gain: 300.0,
+        },
+    ];
+    let n = allocations_in(|| {
+        for cycle in 0..10_000_usize {
+            robot.read_state(&mut state).unwrap();
+            let cmd = commands.get(cycle / 1000 % 3).unwrap();
+            robot.send(cmd).unwrap();
+            match cycle {
+                2_500 => robot.inject_dropped_cycles(5),
+                4_000 => robot.inject_protective_stop(),
+                4_500 => {
+                    robot.clear_protective_stop();
+                    robot.play();
+                }
+                6_000 => robot.set_speed_scaling(0.5).unwrap(),
+                _ => {}
+            }
+            robot.step();
+        }
+    });
+    assert_eq!(n, 0, "allocations over 10 000 cycles");
+    // The loop really ran the model (simulated data).
+    assert!((state.timestamp_s - 19.998).abs() < 1e-9);
+    assert!(robot.ignored_commands() > 0);
+}
