@@ -529,6 +529,16 @@ impl SimRobot {
         true
     }
 
+    /// Power off (the dashboard's `power off`): `robot_mode` POWER_OFF at once, the arm brakes
+    /// at `safety_stop_decel_rad_s2`, the program stops and the latched command is discarded.
+    pub fn power_off(&mut self) {
+        self.robot_mode = robot_mode::POWER_OFF;
+        self.command = None;
+        if self.runtime_state != runtime_state::STOPPED {
+            self.runtime_state = runtime_state::STOPPING;
+        }
+    }
+
     /// Power on: POWER_OFF → IDLE (brakes engaged). Returns `false` if not POWER_OFF or a
     /// safety stop is active.
     pub fn power_on(&mut self) -> bool {
@@ -1256,6 +1266,27 @@ mod tests {
         let s = read(&mut r);
         assert_eq!(s.runtime_state, runtime_state::PLAYING);
         assert!(s.actual_qd[0] > 0.0);
+    }
+
+    #[test]
+    fn power_off_brakes_and_needs_power_on_and_brake_release() {
+        let mut r = robot();
+        r.send(&speed(0.5, PI)).unwrap();
+        run(&mut r, 200);
+        r.power_off();
+        run(&mut r, 100);
+        let s = read(&mut r);
+        assert_eq!(s.robot_mode, robot_mode::POWER_OFF);
+        assert_eq!(s.robot_status_bits & BIT_POWER_ON, 0);
+        assert_eq!(s.actual_qd, [0.0; 6]);
+        assert_eq!(s.runtime_state, runtime_state::STOPPED);
+        r.send(&speed(0.5, PI)).unwrap();
+        assert_eq!(r.ignored_commands(), 1);
+        assert!(!r.play());
+        assert!(r.power_on() && r.brake_release() && r.play());
+        r.send(&speed(0.5, PI)).unwrap();
+        run(&mut r, 5);
+        assert!(read(&mut r).actual_qd[0] > 0.0);
     }
 
     #[test]

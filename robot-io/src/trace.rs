@@ -145,7 +145,9 @@ pub enum FloatFormat {
     /// values below 2^53 print without a decimal point (`7`, not `7.0`).
     #[default]
     RoundTrip,
-    /// A fixed number of decimals, as ur_rtde writes (it uses 6); lossy.
+    /// A fixed number of decimals, as ur_rtde writes (it uses 6); lossy. Integers print with
+    /// decimals too (`2.000000`), which UR's `csv_reader.py` does not match when it filters on
+    /// `runtime_state == "2"` (a string comparison); prefer [`FloatFormat::RoundTrip`].
     Fixed(u8),
 }
 

@@ -1,4 +1,5 @@
-//! `SimRobot::read_state`, `send` and `step` allocate nothing (the control thread's rule).
+//! `SimRobot::read_state`, `send` and `step`, and `ReplayRobot::read_state` and `send`, allocate
+//! nothing (the control thread's rule).
 //!
 //! A counting global allocator wraps `System`. The switch and the counter are thread-local, so
 //! only the thread under test is counted and tests running in parallel do not disturb it.
@@ -6,7 +7,9 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
+use robot_io::replay::{Pacing, ReplayRobot};
 use robot_io::sim::{SimConfig, SimRobot};
+use robot_io::trace::Trace;
 use robot_io::{JointCommand, Robot, RobotState};
 
 struct CountingAllocator;
@@ -108,4 +111,33 @@ fn sim_robot_cycles_allocate_nothing() {
     // The loop really ran the model (simulated data).
     assert!((state.timestamp_s - 19.998).abs() < 1e-9);
     assert!(robot.ignored_commands() > 0);
+}
+
+#[test]
+fn replay_robot_reads_and_sends_allocate_nothing() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../data/rtde-traces/ur3e_25hz_rad_segment_L1L2.csv"
+    );
+    let trace = Trace::read(path).unwrap();
+    let rows = trace.len();
+    let mut per_read = ReplayRobot::with_pacing(trace.clone(), Pacing::PerRead, 16).unwrap();
+    let mut clocked =
+        ReplayRobot::with_pacing(trace, Pacing::Clocked { period_s: 0.002 }, 16).unwrap();
+    let mut state = RobotState::default();
+    let cmd = JointCommand::Stop { decel: 1.0 };
+    let mut clocked_reads = 0;
+    let n = allocations_in(|| {
+        for _ in 0..rows {
+            per_read.read_state(&mut state).unwrap();
+            per_read.send(&cmd).unwrap();
+        }
+        while clocked.read_state(&mut state).is_ok() {
+            clocked.send(&cmd).unwrap();
+            clocked_reads += 1;
+        }
+    });
+    assert_eq!(n, 0);
+    assert!(clocked_reads > 20 * (rows - 1), "{clocked_reads}");
+    assert_eq!(per_read.commands().len(), 16);
 }
