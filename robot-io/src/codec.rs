@@ -840,6 +840,15 @@ impl<'a> ControllerPackage<'a> {
     }
 }
 
+/// Appends a whole `U` package of `values` for `recipe_id` to `out` (no type check against a
+/// recipe; the emulator builds its values from the recipe it answered).
+pub fn encode_data_package(recipe_id: u8, values: &[Value], out: &mut Vec<u8>) -> Result<()> {
+    frame(out, kind::DATA_PACKAGE, |o| {
+        o.push(recipe_id);
+        values.iter().for_each(|v| v.encode(o));
+    })
+}
+
 /// Where one field sits in a data package's payload. `Copy`; precomputed by [`Recipe`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FieldSlot {

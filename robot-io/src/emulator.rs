@@ -1,1 +1,1324 @@
-//! (issue 3: RTDE side; being written)
+//! A UR controller emulator: RTDE (30004), dashboard (29999) and script (30002, 30003) servers
+//! on configurable ports, backed by [`SimBackend`] (the in-process [`SimRobot`], driven by our
+//! register protocol) or [`TraceBackend`] (a recorded [`Trace`]).
+//!
+//! One world task steps the backend in 2 ms controller cycles on a virtual clock: it runs
+//! `speedup` cycles per 2 ms of wall time (1 = real time; tests speed it up). Each RTDE session
+//! is sampled from the virtual clock at its requested frequency, so what a client receives
+//! depends on virtual cycles only, not on scheduling jitter.
+//!
+//! Enforced like a controller: protocol version 2 only, unknown fields answered `NOT_FOUND`,
+//! one writer per input (`IN_USE`), and a client whose queue stays full for
+//! [`EmulatorConfig::stall_timeout`] is dropped.
+//!
+//! Not emulated: the primary/secondary interfaces' state packages (the script ports only
+//! receive), URScript itself (the script port recognises our control program and the emulator
+//! executes our register protocol natively, see [`crate::script::RegisterMap`]).
+
+use std::any::Any;
+use std::collections::HashMap;
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::{Notify, mpsc};
+use tokio::task::JoinHandle;
+
+use crate::codec::{
+    ClientPackage, ControllerPackage, ControllerVersion, FieldType, MAX_FREQUENCY_HZ,
+    PROTOCOL_VERSION, TextMessage, Value, encode_data_package, known_field_type, level,
+};
+use crate::dashboard::{DashboardCommand, robot_mode_name, safety_status_name};
+use crate::script::{DOUBLE_REGISTERS, INT_REGISTERS, RegisterMap};
+use crate::sim::SimRobot;
+use crate::trace::Trace;
+use crate::types::{JointCommand, Robot, RobotState};
+use crate::{Result, RobotIoError};
+
+/// Controller cycle [s].
+pub const CYCLE_S: f64 = 0.002;
+/// Input registers per kind on e-Series (0..=47).
+pub const REGISTERS: usize = 48;
+
+/// Emulator settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EmulatorConfig {
+    /// Address to bind (loopback by default).
+    pub bind: IpAddr,
+    /// RTDE port (30004; 0 = ephemeral).
+    pub rtde_port: u16,
+    /// Dashboard port (29999; 0 = ephemeral).
+    pub dashboard_port: u16,
+    /// Secondary interface port (30002; 0 = ephemeral).
+    pub secondary_port: u16,
+    /// Real-time interface port (30003; 0 = ephemeral).
+    pub realtime_port: u16,
+    /// Controller version reported to RTDE clients.
+    pub controller_version: ControllerVersion,
+    /// Virtual controller cycles run per 2 ms of wall time [-], ≥ 1 (1 = real time).
+    pub speedup: u32,
+    /// A client whose outgoing queue stays full this long is dropped (a controller drops a
+    /// client that stops reading after about 10 s).
+    pub stall_timeout: Duration,
+    /// Outgoing packages queued per client before it counts as stalled [-].
+    pub queue_packages: usize,
+    /// Inputs claimed by "another writer" from the start (as fieldbus adapters claim
+    /// registers 0–23 on some cells); clients asking for them get `IN_USE`.
+    pub preclaimed_inputs: Vec<String>,
+}
+
+impl Default for EmulatorConfig {
+    fn default() -> Self {
+        Self {
+            bind: IpAddr::V4(Ipv4Addr::LOCALHOST),
+            rtde_port: crate::client::RTDE_PORT,
+            dashboard_port: crate::dashboard::DASHBOARD_PORT,
+            secondary_port: crate::script::SECONDARY_PORT,
+            realtime_port: crate::script::REALTIME_PORT,
+            controller_version: ControllerVersion {
+                major: 5,
+                minor: 15,
+                bugfix: 0,
+                build: 0,
+            },
+            speedup: 1,
+            stall_timeout: Duration::from_secs(10),
+            queue_packages: 1000,
+            preclaimed_inputs: Vec::new(),
+        }
+    }
+}
+
+impl EmulatorConfig {
+    /// Loopback with every port ephemeral (for tests running in parallel).
+    pub fn ephemeral() -> Self {
+        Self {
+            rtde_port: 0,
+            dashboard_port: 0,
+            secondary_port: 0,
+            realtime_port: 0,
+            ..Self::default()
+        }
+    }
+}
+
+/// The input registers as clients last wrote them, and when (in virtual cycles).
+#[derive(Debug, Clone)]
+pub struct InputRegisters {
+    /// `input_int_register_N`.
+    pub int: [i32; REGISTERS],
+    /// `input_double_register_N`.
+    pub double: [f64; REGISTERS],
+    /// `input_bit_register_N` for N in 64..=127, bit N−64.
+    pub bits: u64,
+    /// Cycle of the last write of each int register (0 = never).
+    pub int_written: [u64; REGISTERS],
+    /// Current virtual cycle (1 for the first step).
+    pub cycle: u64,
+}
+
+impl Default for InputRegisters {
+    fn default() -> Self {
+        Self {
+            int: [0; REGISTERS],
+            double: [0.0; REGISTERS],
+            bits: 0,
+            int_written: [0; REGISTERS],
+            cycle: 0,
+        }
+    }
+}
+
+/// Opaque handle of a backend output field, resolved once at recipe setup.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OutputHandle(pub usize);
+
+/// What stands behind the emulator: a model or a recording.
+pub trait EmulatorBackend: Send + std::fmt::Debug + 'static {
+    /// A short description for logs and the message sent at stream start.
+    fn describe(&self) -> String;
+    /// Resolves output field `name` (called at setup). `None`: the controller answers
+    /// `NOT_FOUND`.
+    fn output_handle(&mut self, name: &str) -> Option<(OutputHandle, FieldType)>;
+    /// The current value behind `handle` (called for every package sent).
+    fn read_output(&self, handle: OutputHandle) -> Value;
+    /// Advances one 2 ms controller cycle, seeing the input registers as they are now.
+    fn step(&mut self, inputs: &InputRegisters);
+    /// A client started streaming (a trace backend starts playing at the first one).
+    fn stream_started(&mut self) {}
+    /// A script arrived on a script port; returns whether it was accepted as a program.
+    fn load_program(&mut self, script: &str) -> bool;
+    /// A dashboard command; returns the reply line (without newline).
+    fn dashboard(&mut self, cmd: DashboardCommand) -> String;
+    /// For tests and tools that need the concrete backend.
+    fn as_any_mut(&mut self) -> &mut dyn Any;
+}
+
+// ---------------------------------------------------------------------------------------------
+// SimRobot-backed.
+
+/// Output fields a [`SimBackend`] serves, in handle order.
+const SIM_FIELDS: [(&str, FieldType); 15] = [
+    ("timestamp", FieldType::Double),
+    ("actual_q", FieldType::Vector6d),
+    ("actual_qd", FieldType::Vector6d),
+    ("target_q", FieldType::Vector6d),
+    ("target_qd", FieldType::Vector6d),
+    ("actual_TCP_pose", FieldType::Vector6d),
+    ("actual_TCP_speed", FieldType::Vector6d),
+    ("speed_scaling", FieldType::Double),
+    ("target_speed_fraction", FieldType::Double),
+    ("robot_mode", FieldType::Int32),
+    ("safety_mode", FieldType::Int32),
+    ("safety_status", FieldType::Int32),
+    ("runtime_state", FieldType::Uint32),
+    ("robot_status_bits", FieldType::Uint32),
+    ("safety_status_bits", FieldType::Uint32),
+];
+
+/// Handle of the constant-zero output registers a SimBackend serves (our program writes none).
+const SIM_ZERO_BASE: usize = 1000;
+
+/// Backend executing our register protocol on a [`SimRobot`].
+///
+/// The SimRobot starts with its program stopped. A script containing our control program
+/// (recognised by [`RegisterMap::from_program`]) starts it; from then on each cycle the
+/// registers are decoded like the program does and a new command (new sequence number) is
+/// sent to the SimRobot. The watchdog is armed at the first write of the command register
+/// after the program starts: when no write arrives for `1 / watchdog_hz` seconds of virtual
+/// time, the program is stopped (the arm brakes to rest, `runtime_state` goes STOPPED).
+#[derive(Debug)]
+pub struct SimBackend {
+    robot: SimRobot,
+    published: RobotState,
+    program: Option<RegisterMap>,
+    program_start_cycle: u64,
+    last_seq: Option<i32>,
+    watchdog_trips: u64,
+    commands_executed: u64,
+    remote_control: bool,
+}
+
+impl SimBackend {
+    /// Wraps `robot`; its program is stopped until our control program arrives.
+    pub fn new(mut robot: SimRobot) -> Self {
+        robot.stop_program();
+        let mut published = RobotState::default();
+        let _ = robot.read_state(&mut published);
+        Self {
+            robot,
+            published,
+            program: None,
+            program_start_cycle: 0,
+            last_seq: None,
+            watchdog_trips: 0,
+            commands_executed: 0,
+            remote_control: true,
+        }
+    }
+
+    /// The simulated robot (for fault injection).
+    pub fn robot_mut(&mut self) -> &mut SimRobot {
+        &mut self.robot
+    }
+
+    /// The state published to clients after the last cycle.
+    pub fn published(&self) -> &RobotState {
+        &self.published
+    }
+
+    /// Whether our control program runs.
+    pub fn program_running(&self) -> bool {
+        self.program.is_some()
+    }
+
+    /// Times the watchdog stopped the program.
+    pub fn watchdog_trips(&self) -> u64 {
+        self.watchdog_trips
+    }
+
+    /// Commands (new sequence numbers) passed to the SimRobot.
+    pub fn commands_executed(&self) -> u64 {
+        self.commands_executed
+    }
+
+    /// Sets the reply of `is in remote control`.
+    pub fn set_remote_control(&mut self, remote: bool) {
+        self.remote_control = remote;
+    }
+
+    fn run_program(&mut self, inputs: &InputRegisters) {
+        let Some(map) = self.program else { return };
+        let ib = usize::from(map.int_base);
+        let db = usize::from(map.double_base);
+        let written = inputs.int_written.get(ib).copied().unwrap_or(0);
+        if written > self.program_start_cycle {
+            let limit = (1.0 / (map.watchdog_hz * CYCLE_S)).ceil() as u64;
+            if inputs.cycle.saturating_sub(written) > limit {
+                tracing::warn!(
+                    "emulator: rtde watchdog expired on input_int_register_{ib}: stopping the program"
+                );
+                self.watchdog_trips += 1;
+                self.program = None;
+                self.robot.stop_program();
+                return;
+            }
+        }
+        let (Some(ints), Some(doubles)) = (
+            inputs.int.get(ib..ib + INT_REGISTERS),
+            inputs.double.get(db..db + DOUBLE_REGISTERS),
+        ) else {
+            return;
+        };
+        let (Ok(ints), Ok(doubles)) = (
+            <[i32; INT_REGISTERS]>::try_from(ints),
+            <[f64; DOUBLE_REGISTERS]>::try_from(doubles),
+        ) else {
+            return;
+        };
+        let seq = ints.get(1).copied();
+        if seq == self.last_seq {
+            return;
+        }
+        self.last_seq = seq;
+        if let Some(cmd) = RegisterMap::decode(&ints, &doubles) {
+            self.commands_executed += 1;
+            if let Err(e) = self.robot.send(&cmd) {
+                tracing::warn!("emulator: simulated robot refused {cmd:?}: {e}");
+            }
+        }
+    }
+}
+
+fn joints_value(j: [f64; 6]) -> Value {
+    Value::Vector6d(j)
+}
+
+impl EmulatorBackend for SimBackend {
+    fn describe(&self) -> String {
+        "simulated ur5e (SimRobot), register protocol".into()
+    }
+
+    fn output_handle(&mut self, name: &str) -> Option<(OutputHandle, FieldType)> {
+        if let Some(i) = SIM_FIELDS.iter().position(|(n, _)| *n == name) {
+            return SIM_FIELDS.get(i).map(|(_, t)| (OutputHandle(i), *t));
+        }
+        let is_output_register = name.starts_with("output_int_register_")
+            || name.starts_with("output_double_register_")
+            || name.starts_with("output_bit_register");
+        if is_output_register {
+            let ty = known_field_type(name)?;
+            let k = FieldType::ALL.iter().position(|t| *t == ty).unwrap_or(0);
+            return Some((OutputHandle(SIM_ZERO_BASE + k), ty));
+        }
+        None
+    }
+
+    fn read_output(&self, handle: OutputHandle) -> Value {
+        let s = &self.published;
+        match handle.0 {
+            0 => Value::Double(s.timestamp_s),
+            1 => joints_value(s.actual_q),
+            2 => joints_value(s.actual_qd),
+            3 => joints_value(s.target_q),
+            4 => joints_value(s.target_qd),
+            5 => Value::Vector6d(s.actual_tcp_pose),
+            6 => Value::Vector6d(s.actual_tcp_speed),
+            7 => Value::Double(s.speed_scaling),
+            8 => Value::Double(s.target_speed_fraction),
+            9 => Value::Int32(s.robot_mode),
+            10 | 11 => Value::Int32(s.safety_mode),
+            12 => Value::Uint32(s.runtime_state),
+            13 => Value::Uint32(s.robot_status_bits),
+            14 => Value::Uint32(s.safety_status_bits),
+            h => Value::zero(
+                FieldType::ALL
+                    .get(h.saturating_sub(SIM_ZERO_BASE))
+                    .copied()
+                    .unwrap_or(FieldType::Double),
+            ),
+        }
+    }
+
+    fn step(&mut self, inputs: &InputRegisters) {
+        self.run_program(inputs);
+        self.robot.step();
+        let _ = self.robot.read_state(&mut self.published);
+    }
+
+    fn load_program(&mut self, script: &str) -> bool {
+        let Some(map) = RegisterMap::from_program(script) else {
+            tracing::info!(
+                "emulator: script is not the hrc_control program; ignored ({} bytes)",
+                script.len()
+            );
+            return false;
+        };
+        if !self.robot.play() {
+            tracing::warn!(
+                "emulator: program received but the robot cannot play (not running, or safety stop)"
+            );
+            return false;
+        }
+        tracing::info!("emulator: hrc_control program started ({map:?})");
+        self.program = Some(map);
+        self.program_start_cycle = self.robot.cycles();
+        self.last_seq = None;
+        true
+    }
+
+    fn dashboard(&mut self, cmd: DashboardCommand) -> String {
+        let failed = |c: DashboardCommand| format!("Failed to execute: {}", c.as_str());
+        match cmd {
+            DashboardCommand::PowerOn => {
+                if self.robot.power_on() {
+                    "Powering on".into()
+                } else {
+                    failed(cmd)
+                }
+            }
+            DashboardCommand::PowerOff => format!("{} (not emulated)", failed(cmd)),
+            DashboardCommand::BrakeRelease => {
+                if self.robot.brake_release() {
+                    "Brake releasing".into()
+                } else {
+                    failed(cmd)
+                }
+            }
+            DashboardCommand::Play => {
+                if self.program.is_some() && self.robot.play() {
+                    "Starting program".into()
+                } else {
+                    failed(cmd)
+                }
+            }
+            DashboardCommand::Pause => {
+                self.robot.pause();
+                "Pausing program".into()
+            }
+            DashboardCommand::Stop => {
+                self.robot.stop_program();
+                self.program = None;
+                "Stopped".into()
+            }
+            DashboardCommand::SafetyStatus => {
+                format!(
+                    "Safetystatus: {}",
+                    safety_status_name(self.published.safety_mode)
+                )
+            }
+            DashboardCommand::RobotMode => {
+                format!("Robotmode: {}", robot_mode_name(self.published.robot_mode))
+            }
+            DashboardCommand::UnlockProtectiveStop => {
+                if self.robot.clear_protective_stop() {
+                    "Protective stop releasing".into()
+                } else {
+                    "Cannot unlock protective stop: no protective stop active".into()
+                }
+            }
+            DashboardCommand::CloseSafetyPopup => "closing safety popup".into(),
+            DashboardCommand::IsInRemoteControl => self.remote_control.to_string(),
+            DashboardCommand::Quit => "Disconnected".into(),
+        }
+    }
+
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Trace-backed.
+
+/// How a trace is resampled to the requested output frequency.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReplayMode {
+    /// Each package carries the last recorded row at or before the virtual time, bit for bit
+    /// (repeated when sampling faster than recorded).
+    Hold,
+    /// DOUBLE and vector-of-double fields are interpolated linearly between rows, and
+    /// `timestamp` is the virtual time; integer fields are held.
+    Interpolate,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct TraceColumn {
+    ty: FieldType,
+    cols: [usize; 6],
+}
+
+/// Backend streaming a recorded [`Trace`].
+///
+/// Playback starts at the first row when the first client starts streaming, advances 2 ms per
+/// cycle, and holds the last row after the end. Fields whose columns the trace lacks
+/// (`name`, or `name_0..name_k` for vectors) are answered `NOT_FOUND`; so are names unknown
+/// to RTDE. Commands, programs and inputs are ignored: the state evolves as recorded.
+#[derive(Debug)]
+pub struct TraceBackend {
+    trace: Trace,
+    mode: ReplayMode,
+    columns: Vec<TraceColumn>,
+    playing: bool,
+    t: f64,
+    row: usize,
+}
+
+impl TraceBackend {
+    /// Plays `trace` (at least one row) in `mode`.
+    pub fn new(trace: Trace, mode: ReplayMode) -> Result<Self> {
+        let t = trace
+            .timestamp(0)
+            .ok_or_else(|| RobotIoError::InvalidConfig {
+                reason: format!("trace {} has no rows", trace.source().display()),
+            })?;
+        Ok(Self {
+            trace,
+            mode,
+            columns: Vec::new(),
+            playing: false,
+            t,
+            row: 0,
+        })
+    }
+
+    /// The replay mode.
+    pub fn mode(&self) -> ReplayMode {
+        self.mode
+    }
+
+    /// The trace played.
+    pub fn trace(&self) -> &Trace {
+        &self.trace
+    }
+
+    /// The row in force now.
+    pub fn row(&self) -> usize {
+        self.row
+    }
+
+    /// Whether the last row has been reached.
+    pub fn finished(&self) -> bool {
+        self.row + 1 >= self.trace.len()
+    }
+
+    fn value_at(&self, row: usize, col: usize) -> f64 {
+        self.trace.value_at(row, col).unwrap_or(0.0)
+    }
+}
+
+impl EmulatorBackend for TraceBackend {
+    fn describe(&self) -> String {
+        let mode = match self.mode {
+            ReplayMode::Hold => "hold (recorded values repeated between rows, bit for bit)",
+            ReplayMode::Interpolate => "interpolate (doubles linear between rows, integers held)",
+        };
+        format!(
+            "trace replay of {} ({} rows): {mode}",
+            self.trace.source().display(),
+            self.trace.len()
+        )
+    }
+
+    fn output_handle(&mut self, name: &str) -> Option<(OutputHandle, FieldType)> {
+        let ty = known_field_type(name)?;
+        let mut cols = [0usize; 6];
+        if ty.width() == 1 {
+            cols[0] = self.trace.column_index(name)?;
+        } else {
+            for (i, c) in cols.iter_mut().take(ty.width()).enumerate() {
+                *c = self.trace.column_index(&format!("{name}_{i}"))?;
+            }
+        }
+        self.columns.push(TraceColumn { ty, cols });
+        Some((OutputHandle(self.columns.len() - 1), ty))
+    }
+
+    fn read_output(&self, handle: OutputHandle) -> Value {
+        let Some(c) = self.columns.get(handle.0) else {
+            return Value::Double(0.0);
+        };
+        let w = c.ty.width();
+        let mut v = [0.0f64; 6];
+        let interpolate = self.mode == ReplayMode::Interpolate
+            && matches!(
+                c.ty,
+                FieldType::Double | FieldType::Vector3d | FieldType::Vector6d
+            );
+        let next = self.row + 1;
+        let t0 = self.trace.timestamp(self.row).unwrap_or(self.t);
+        let alpha = match self.trace.timestamp(next) {
+            Some(t1) if interpolate && t1 > t0 => ((self.t - t0) / (t1 - t0)).clamp(0.0, 1.0),
+            _ => 0.0,
+        };
+        for (i, x) in v.iter_mut().take(w).enumerate() {
+            let col = c.cols.get(i).copied().unwrap_or(0);
+            let a = self.value_at(self.row, col);
+            *x = if alpha > 0.0 {
+                if col == 0 {
+                    self.t
+                } else {
+                    a + alpha * (self.value_at(next, col) - a)
+                }
+            } else {
+                a
+            };
+        }
+        Value::from_components(c.ty, &v)
+    }
+
+    fn step(&mut self, _inputs: &InputRegisters) {
+        if !self.playing {
+            return;
+        }
+        self.t += CYCLE_S;
+        while let Some(ts) = self.trace.timestamp(self.row + 1) {
+            // Tolerance: recorded periods carry float noise (0.0999999999999 s).
+            if ts <= self.t + 1e-9 {
+                self.row += 1;
+            } else {
+                break;
+            }
+        }
+    }
+
+    fn stream_started(&mut self) {
+        if !self.playing {
+            tracing::info!("emulator: {}", self.describe());
+        }
+        self.playing = true;
+    }
+
+    fn load_program(&mut self, script: &str) -> bool {
+        tracing::info!(
+            "emulator: trace replay ignores scripts ({} bytes received)",
+            script.len()
+        );
+        false
+    }
+
+    fn dashboard(&mut self, cmd: DashboardCommand) -> String {
+        let field = |name: &str| self.trace.value(self.row, name).map(|v| v as i32);
+        match cmd {
+            DashboardCommand::SafetyStatus => {
+                let mode = field("safety_mode")
+                    .or_else(|| field("safety_status"))
+                    .unwrap_or(1);
+                format!("Safetystatus: {}", safety_status_name(mode))
+            }
+            DashboardCommand::RobotMode => {
+                format!(
+                    "Robotmode: {}",
+                    robot_mode_name(field("robot_mode").unwrap_or(7))
+                )
+            }
+            DashboardCommand::CloseSafetyPopup => "closing safety popup".into(),
+            DashboardCommand::IsInRemoteControl => "true".into(),
+            DashboardCommand::Quit => "Disconnected".into(),
+            other => format!(
+                "Failed to execute: {} (trace replay is read-only)",
+                other.as_str()
+            ),
+        }
+    }
+
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The world and the servers.
+
+/// Where an output value comes from.
+#[derive(Debug, Clone, Copy)]
+enum Source {
+    Backend(OutputHandle),
+    InputInt(usize),
+    InputDouble(usize),
+    InputBit(usize),
+}
+
+/// Where an input value goes.
+#[derive(Debug, Clone, Copy)]
+enum Target {
+    Int(usize),
+    Double(usize),
+    Bit(usize),
+    /// A valid input the emulator accepts and ignores (speed slider, digital outputs, …).
+    Ignored,
+}
+
+#[derive(Debug)]
+struct Stream {
+    session: u64,
+    recipe_id: u8,
+    sources: Vec<Source>,
+    values: Vec<Value>,
+    period_cycles: f64,
+    next_cycle: f64,
+    streaming: bool,
+    tx: mpsc::Sender<Vec<u8>>,
+    stalled_since: Option<Instant>,
+}
+
+#[derive(Debug)]
+struct World {
+    backend: Box<dyn EmulatorBackend>,
+    inputs: InputRegisters,
+    owners: HashMap<String, u64>,
+    streams: Vec<Stream>,
+    sessions: HashMap<u64, Arc<Notify>>,
+    cycle: u64,
+    silent: bool,
+    stall_timeout: Duration,
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+fn register_index(name: &str, prefix: &str) -> Option<usize> {
+    name.strip_prefix(prefix)?.parse().ok()
+}
+
+impl World {
+    fn step(&mut self) {
+        self.cycle += 1;
+        self.inputs.cycle = self.cycle;
+        self.backend.step(&self.inputs);
+        let cycle = self.cycle as f64;
+        let now = Instant::now();
+        let mut dead = Vec::new();
+        for s in self.streams.iter_mut().filter(|s| s.streaming) {
+            if cycle < s.next_cycle {
+                continue;
+            }
+            s.next_cycle += s.period_cycles;
+            if self.silent {
+                continue;
+            }
+            for (v, src) in s.values.iter_mut().zip(&s.sources) {
+                *v = match *src {
+                    Source::Backend(h) => self.backend.read_output(h),
+                    Source::InputInt(i) => {
+                        Value::Int32(self.inputs.int.get(i).copied().unwrap_or(0))
+                    }
+                    Source::InputDouble(i) => {
+                        Value::Double(self.inputs.double.get(i).copied().unwrap_or(0.0))
+                    }
+                    Source::InputBit(i) => {
+                        Value::Bool(self.inputs.bits >> (i.saturating_sub(64) & 63) & 1 == 1)
+                    }
+                };
+            }
+            let mut pkg = Vec::with_capacity(
+                4 + s
+                    .values
+                    .iter()
+                    .map(|v| v.field_type().size())
+                    .sum::<usize>(),
+            );
+            if encode_data_package(s.recipe_id, &s.values, &mut pkg).is_err() {
+                continue;
+            }
+            match s.tx.try_send(pkg) {
+                Ok(()) => s.stalled_since = None,
+                Err(mpsc::error::TrySendError::Full(_)) => {
+                    let since = *s.stalled_since.get_or_insert(now);
+                    if now.duration_since(since) > self.stall_timeout {
+                        tracing::warn!(
+                            "emulator: rtde client {} stopped reading; dropping it",
+                            s.session
+                        );
+                        dead.push(s.session);
+                    }
+                }
+                Err(mpsc::error::TrySendError::Closed(_)) => dead.push(s.session),
+            }
+        }
+        for id in dead {
+            self.end_session(id);
+        }
+    }
+
+    fn end_session(&mut self, id: u64) {
+        self.streams.retain(|s| s.session != id);
+        self.owners.retain(|_, owner| *owner != id);
+        if let Some(kill) = self.sessions.remove(&id) {
+            kill.notify_one();
+        }
+    }
+
+    fn output_source(&mut self, name: &str) -> Option<(Source, FieldType)> {
+        if let Some(i) = register_index(name, "input_int_register_").filter(|i| *i < REGISTERS) {
+            return Some((Source::InputInt(i), FieldType::Int32));
+        }
+        if let Some(i) = register_index(name, "input_double_register_").filter(|i| *i < REGISTERS) {
+            return Some((Source::InputDouble(i), FieldType::Double));
+        }
+        if let Some(i) =
+            register_index(name, "input_bit_register_").filter(|i| (64..128).contains(i))
+        {
+            return Some((Source::InputBit(i), FieldType::Bool));
+        }
+        self.backend
+            .output_handle(name)
+            .map(|(h, t)| (Source::Backend(h), t))
+    }
+
+    fn write_input(&mut self, target: Target, value: Value) {
+        match (target, value) {
+            (Target::Int(i), Value::Int32(v)) => {
+                if let Some(r) = self.inputs.int.get_mut(i) {
+                    *r = v;
+                }
+                if let Some(w) = self.inputs.int_written.get_mut(i) {
+                    *w = self.cycle.max(1);
+                }
+            }
+            (Target::Double(i), Value::Double(v)) => {
+                if let Some(r) = self.inputs.double.get_mut(i) {
+                    *r = v;
+                }
+            }
+            (Target::Bit(i), Value::Bool(b)) => {
+                let bit = 1u64 << (i.saturating_sub(64) & 63);
+                if b {
+                    self.inputs.bits |= bit;
+                } else {
+                    self.inputs.bits &= !bit;
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+fn input_target(name: &str) -> Option<(Target, FieldType)> {
+    if let Some(i) = register_index(name, "input_int_register_").filter(|i| *i < REGISTERS) {
+        return Some((Target::Int(i), FieldType::Int32));
+    }
+    if let Some(i) = register_index(name, "input_double_register_").filter(|i| *i < REGISTERS) {
+        return Some((Target::Double(i), FieldType::Double));
+    }
+    if let Some(i) = register_index(name, "input_bit_register_").filter(|i| (64..128).contains(i)) {
+        return Some((Target::Bit(i), FieldType::Bool));
+    }
+    const OTHER_INPUTS: [&str; 13] = [
+        "speed_slider_mask",
+        "speed_slider_fraction",
+        "standard_digital_output_mask",
+        "standard_digital_output",
+        "configurable_digital_output_mask",
+        "configurable_digital_output",
+        "tool_digital_output_mask",
+        "tool_digital_output",
+        "standard_analog_output_mask",
+        "standard_analog_output_type",
+        "standard_analog_output_0",
+        "standard_analog_output_1",
+        "external_force_torque",
+    ];
+    if OTHER_INPUTS.contains(&name)
+        || name == "input_bit_registers0_to_31"
+        || name == "input_bit_registers32_to_63"
+    {
+        return known_field_type(name).map(|t| (Target::Ignored, t));
+    }
+    None
+}
+
+/// A running emulator. Dropping it stops every server.
+#[derive(Debug)]
+pub struct Emulator {
+    world: Arc<Mutex<World>>,
+    tasks: Vec<JoinHandle<()>>,
+    rtde: SocketAddr,
+    dashboard: SocketAddr,
+    secondary: SocketAddr,
+    realtime: SocketAddr,
+    programs: Arc<AtomicU64>,
+}
+
+async fn bind(ip: IpAddr, port: u16, what: &str) -> Result<TcpListener> {
+    TcpListener::bind(SocketAddr::new(ip, port))
+        .await
+        .map_err(|source| RobotIoError::Io {
+            context: format!("binding the {what} port {ip}:{port}"),
+            source,
+        })
+}
+
+fn local(l: &TcpListener) -> Result<SocketAddr> {
+    l.local_addr().map_err(|source| RobotIoError::Io {
+        context: "reading a bound address".into(),
+        source,
+    })
+}
+
+impl Emulator {
+    /// Binds every port and starts serving. Must be called inside a tokio runtime.
+    pub async fn start(cfg: EmulatorConfig, backend: Box<dyn EmulatorBackend>) -> Result<Emulator> {
+        if cfg.speedup == 0 || cfg.queue_packages == 0 {
+            return Err(RobotIoError::InvalidConfig {
+                reason: "speedup and queue_packages must be at least 1".into(),
+            });
+        }
+        let rtde = bind(cfg.bind, cfg.rtde_port, "rtde").await?;
+        let dash = bind(cfg.bind, cfg.dashboard_port, "dashboard").await?;
+        let sec = bind(cfg.bind, cfg.secondary_port, "secondary").await?;
+        let rt = bind(cfg.bind, cfg.realtime_port, "real-time").await?;
+        let (rtde_addr, dash_addr, sec_addr, rt_addr) =
+            (local(&rtde)?, local(&dash)?, local(&sec)?, local(&rt)?);
+        let mut owners = HashMap::new();
+        for name in &cfg.preclaimed_inputs {
+            owners.insert(name.clone(), 0);
+        }
+        let world = Arc::new(Mutex::new(World {
+            backend,
+            inputs: InputRegisters::default(),
+            owners,
+            streams: Vec::new(),
+            sessions: HashMap::new(),
+            cycle: 0,
+            silent: false,
+            stall_timeout: cfg.stall_timeout,
+        }));
+        let cfg = Arc::new(cfg);
+        let programs = Arc::new(AtomicU64::new(0));
+        let tasks = vec![
+            tokio::spawn(ticker(world.clone(), cfg.speedup)),
+            tokio::spawn(serve_rtde(rtde, world.clone(), cfg.clone())),
+            tokio::spawn(serve_dashboard(dash, world.clone())),
+            tokio::spawn(serve_script(sec, world.clone(), programs.clone())),
+            tokio::spawn(serve_script(rt, world.clone(), programs.clone())),
+        ];
+        tracing::info!(
+            "emulator: rtde {rtde_addr}, dashboard {dash_addr}, script {sec_addr} / {rt_addr}: {}",
+            lock(&world).backend.describe()
+        );
+        Ok(Emulator {
+            world,
+            tasks,
+            rtde: rtde_addr,
+            dashboard: dash_addr,
+            secondary: sec_addr,
+            realtime: rt_addr,
+            programs,
+        })
+    }
+
+    /// Bound RTDE address.
+    pub fn rtde_addr(&self) -> SocketAddr {
+        self.rtde
+    }
+
+    /// Bound dashboard address.
+    pub fn dashboard_addr(&self) -> SocketAddr {
+        self.dashboard
+    }
+
+    /// Bound secondary-interface (script) address.
+    pub fn secondary_addr(&self) -> SocketAddr {
+        self.secondary
+    }
+
+    /// Bound real-time-interface (script) address.
+    pub fn realtime_addr(&self) -> SocketAddr {
+        self.realtime
+    }
+
+    /// Virtual controller cycles run so far.
+    pub fn cycle(&self) -> u64 {
+        lock(&self.world).cycle
+    }
+
+    /// Scripts received on the script ports so far.
+    pub fn scripts_received(&self) -> u64 {
+        self.programs.load(Ordering::Relaxed)
+    }
+
+    /// Open RTDE sessions.
+    pub fn rtde_sessions(&self) -> usize {
+        lock(&self.world).sessions.len()
+    }
+
+    /// Closes every RTDE connection (a cut link, as seen by clients).
+    pub fn cut_rtde_links(&self) {
+        let mut w = lock(&self.world);
+        let ids: Vec<u64> = w.sessions.keys().copied().collect();
+        for id in ids {
+            w.end_session(id);
+        }
+    }
+
+    /// While `silent`, no data package is sent (connections stay open): a link that stalls.
+    pub fn set_rtde_silent(&self, silent: bool) {
+        lock(&self.world).silent = silent;
+    }
+
+    /// Runs `f` on the backend (under the world lock: keep it short).
+    pub fn with_backend<R>(&self, f: impl FnOnce(&mut dyn EmulatorBackend) -> R) -> R {
+        f(lock(&self.world).backend.as_mut())
+    }
+
+    /// Runs `f` on the [`SimBackend`], if that is the backend.
+    pub fn with_sim<R>(&self, f: impl FnOnce(&mut SimBackend) -> R) -> Option<R> {
+        self.with_backend(|b| b.as_any_mut().downcast_mut::<SimBackend>().map(f))
+    }
+
+    /// Runs `f` on the [`TraceBackend`], if that is the backend.
+    pub fn with_trace<R>(&self, f: impl FnOnce(&mut TraceBackend) -> R) -> Option<R> {
+        self.with_backend(|b| b.as_any_mut().downcast_mut::<TraceBackend>().map(f))
+    }
+
+    /// Stops every server and closes every connection.
+    pub fn shutdown(&mut self) {
+        self.cut_rtde_links();
+        for t in &self.tasks {
+            t.abort();
+        }
+    }
+}
+
+impl Drop for Emulator {
+    fn drop(&mut self) {
+        self.shutdown();
+    }
+}
+
+async fn ticker(world: Arc<Mutex<World>>, speedup: u32) {
+    let mut interval = tokio::time::interval(Duration::from_secs_f64(CYCLE_S));
+    interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        interval.tick().await;
+        let mut w = lock(&world);
+        for _ in 0..speedup {
+            w.step();
+        }
+    }
+}
+
+async fn serve_rtde(listener: TcpListener, world: Arc<Mutex<World>>, cfg: Arc<EmulatorConfig>) {
+    let next_id = AtomicU64::new(1);
+    loop {
+        let Ok((stream, peer)) = listener.accept().await else {
+            continue;
+        };
+        let id = next_id.fetch_add(1, Ordering::Relaxed);
+        tracing::debug!("emulator: rtde client {id} from {peer}");
+        tokio::spawn(rtde_session(stream, id, world.clone(), cfg.clone()));
+    }
+}
+
+async fn read_client_package(
+    r: &mut BufReader<tokio::net::tcp::OwnedReadHalf>,
+    buf: &mut Vec<u8>,
+) -> std::io::Result<()> {
+    let mut size = [0u8; 2];
+    r.read_exact(&mut size).await?;
+    let n = usize::from(u16::from_be_bytes(size));
+    buf.clear();
+    buf.extend_from_slice(&size);
+    buf.resize(n.max(2), 0);
+    if let Some(rest) = buf.get_mut(2..) {
+        r.read_exact(rest).await?;
+    }
+    Ok(())
+}
+
+fn reply(tx: &mpsc::Sender<Vec<u8>>, pkg: ControllerPackage<'_>) -> bool {
+    let mut out = Vec::new();
+    pkg.encode(&mut out).is_ok() && tx.try_send(out).is_ok()
+}
+
+async fn rtde_session(
+    stream: TcpStream,
+    id: u64,
+    world: Arc<Mutex<World>>,
+    cfg: Arc<EmulatorConfig>,
+) {
+    let _ = stream.set_nodelay(true);
+    let (r, mut w) = stream.into_split();
+    let mut r = BufReader::new(r);
+    let (tx, mut rx) = mpsc::channel::<Vec<u8>>(cfg.queue_packages);
+    let kill = Arc::new(Notify::new());
+    lock(&world).sessions.insert(id, kill.clone());
+    let mut writer = tokio::spawn(async move {
+        while let Some(pkg) = rx.recv().await {
+            if w.write_all(&pkg).await.is_err() {
+                break;
+            }
+        }
+        let _ = w.shutdown().await;
+    });
+    let mut buf = Vec::with_capacity(4096);
+    let mut next_recipe: u8 = 1;
+    let mut inputs: HashMap<u8, Vec<(Target, FieldType)>> = HashMap::new();
+    let mut decoded: Vec<Value> = Vec::new();
+    loop {
+        tokio::select! {
+            () = kill.notified() => break,
+            r = read_client_package(&mut r, &mut buf) => if r.is_err() { break },
+        }
+        let pkg = match ClientPackage::decode(&buf) {
+            Ok(p) => p,
+            Err(e) => {
+                tracing::warn!("emulator: rtde client {id} sent a bad package ({e}); closing");
+                break;
+            }
+        };
+        let ok = match pkg {
+            ClientPackage::RequestProtocolVersion { version } => reply(
+                &tx,
+                ControllerPackage::ProtocolVersionAccepted(version == PROTOCOL_VERSION),
+            ),
+            ClientPackage::GetControllerVersion => reply(
+                &tx,
+                ControllerPackage::ControllerVersion(cfg.controller_version),
+            ),
+            ClientPackage::SetupOutputs {
+                frequency_hz,
+                names,
+            } => {
+                let mut w = lock(&world);
+                let mut types = Vec::new();
+                let mut sources = Vec::new();
+                for name in names.split(',') {
+                    match w.output_source(name) {
+                        Some((s, t)) => {
+                            sources.push(s);
+                            types.push(t.as_str());
+                        }
+                        None => types.push("NOT_FOUND"),
+                    }
+                }
+                let valid_freq = frequency_hz > 0.0 && frequency_hz <= MAX_FREQUENCY_HZ;
+                let accepted = valid_freq && sources.len() == types.len();
+                let recipe_id = if accepted { next_recipe } else { 0 };
+                if accepted {
+                    next_recipe = next_recipe.wrapping_add(1).max(1);
+                    w.streams.retain(|s| s.session != id);
+                    let values = sources.iter().map(|_| Value::Double(0.0)).collect();
+                    w.streams.push(Stream {
+                        session: id,
+                        recipe_id,
+                        sources,
+                        values,
+                        period_cycles: 1.0 / (frequency_hz * CYCLE_S),
+                        next_cycle: 0.0,
+                        streaming: false,
+                        tx: tx.clone(),
+                        stalled_since: None,
+                    });
+                }
+                drop(w);
+                let types = types.join(",");
+                reply(
+                    &tx,
+                    ControllerPackage::SetupOutputsReply {
+                        recipe_id,
+                        types: &types,
+                    },
+                )
+            }
+            ClientPackage::SetupInputs { names } => {
+                let mut w = lock(&world);
+                let mut types = Vec::new();
+                let mut targets = Vec::new();
+                let mut refused = false;
+                for name in names.split(',') {
+                    match (input_target(name), w.owners.get(name)) {
+                        (None, _) => {
+                            types.push("NOT_FOUND");
+                            refused = true;
+                        }
+                        (Some(_), Some(owner)) if *owner != id => {
+                            types.push("IN_USE");
+                            refused = true;
+                        }
+                        (Some((t, ty)), _) => {
+                            types.push(ty.as_str());
+                            targets.push((t, ty));
+                        }
+                    }
+                }
+                let recipe_id = if refused { 0 } else { next_recipe };
+                if !refused {
+                    next_recipe = next_recipe.wrapping_add(1).max(1);
+                    for name in names.split(',') {
+                        w.owners.insert(name.to_owned(), id);
+                    }
+                    inputs.insert(recipe_id, targets);
+                }
+                drop(w);
+                let types = types.join(",");
+                reply(
+                    &tx,
+                    ControllerPackage::SetupInputsReply {
+                        recipe_id,
+                        types: &types,
+                    },
+                )
+            }
+            ClientPackage::Start => {
+                let mut w = lock(&world);
+                let cycle = w.cycle as f64;
+                let has = w.streams.iter().any(|s| s.session == id);
+                // Reply first, so the client sees it before any data.
+                let ok = reply(&tx, ControllerPackage::StartAccepted(has));
+                if has {
+                    w.backend.stream_started();
+                    let msg = w.backend.describe();
+                    let cut = msg
+                        .char_indices()
+                        .map(|(i, c)| i + c.len_utf8())
+                        .take_while(|e| *e <= 255)
+                        .last()
+                        .unwrap_or(0);
+                    let trimmed = msg.get(..cut).unwrap_or("");
+                    reply(
+                        &tx,
+                        ControllerPackage::Text(TextMessage {
+                            message: trimmed,
+                            source: "emulator",
+                            level: level::INFO,
+                        }),
+                    );
+                    if let Some(s) = w.streams.iter_mut().find(|s| s.session == id) {
+                        s.streaming = true;
+                        s.next_cycle = cycle + 1.0;
+                    }
+                }
+                ok
+            }
+            ClientPackage::Pause => {
+                let mut w = lock(&world);
+                if let Some(s) = w.streams.iter_mut().find(|s| s.session == id) {
+                    s.streaming = false;
+                }
+                reply(&tx, ControllerPackage::PauseAccepted(true))
+            }
+            ClientPackage::Data(d) => {
+                if let Some(targets) = inputs.get(&d.recipe_id) {
+                    decoded.clear();
+                    let mut at = 0;
+                    let mut ok = true;
+                    for (_, ty) in targets {
+                        match Value::decode(*ty, d.payload, at) {
+                            Ok(v) => decoded.push(v),
+                            Err(_) => ok = false,
+                        }
+                        at += ty.size();
+                    }
+                    if ok && at == d.payload.len() {
+                        let mut w = lock(&world);
+                        for ((t, _), v) in targets.iter().zip(&decoded) {
+                            w.write_input(*t, *v);
+                        }
+                    } else {
+                        tracing::warn!(
+                            "emulator: rtde client {id} sent a malformed input package; ignored"
+                        );
+                    }
+                } else {
+                    tracing::warn!(
+                        "emulator: rtde client {id} sent inputs for unknown recipe {}",
+                        d.recipe_id
+                    );
+                }
+                true
+            }
+            ClientPackage::Text(t) => {
+                tracing::info!("emulator: rtde client {id} says: {}", t.message);
+                true
+            }
+        };
+        if !ok {
+            tracing::warn!("emulator: rtde client {id} is not reading; closing");
+            break;
+        }
+    }
+    lock(&world).end_session(id);
+    drop(tx);
+    // The writer ends when every sender (ours and the world's stream) is gone.
+    if tokio::time::timeout(Duration::from_secs(1), &mut writer)
+        .await
+        .is_err()
+    {
+        // Blocked on a client that does not read: give up on it.
+        writer.abort();
+    }
+}
+
+async fn serve_dashboard(listener: TcpListener, world: Arc<Mutex<World>>) {
+    loop {
+        let Ok((stream, _)) = listener.accept().await else {
+            continue;
+        };
+        let world = world.clone();
+        tokio::spawn(async move {
+            let (r, mut w) = stream.into_split();
+            let mut lines = BufReader::new(r).lines();
+            if w.write_all(b"Connected: Universal Robots Dashboard Server\n")
+                .await
+                .is_err()
+            {
+                return;
+            }
+            while let Ok(Some(line)) = lines.next_line().await {
+                let cmd = DashboardCommand::parse(&line);
+                let reply = match cmd {
+                    Some(c) => lock(&world).backend.dashboard(c),
+                    None => format!("could not understand: '{}'", line.trim()),
+                };
+                if w.write_all(format!("{reply}\n").as_bytes()).await.is_err()
+                    || cmd == Some(DashboardCommand::Quit)
+                {
+                    break;
+                }
+            }
+        });
+    }
+}
+
+async fn serve_script(listener: TcpListener, world: Arc<Mutex<World>>, count: Arc<AtomicU64>) {
+    loop {
+        let Ok((mut stream, _)) = listener.accept().await else {
+            continue;
+        };
+        let world = world.clone();
+        let count = count.clone();
+        tokio::spawn(async move {
+            // A script ends when the sender closes, or after 500 ms without more bytes.
+            let mut text = Vec::new();
+            let mut chunk = [0u8; 4096];
+            while let Ok(Ok(n)) =
+                tokio::time::timeout(Duration::from_millis(500), stream.read(&mut chunk)).await
+            {
+                if n == 0 || text.len() > (1 << 20) {
+                    break;
+                }
+                text.extend_from_slice(chunk.get(..n).unwrap_or_default());
+            }
+            let text = String::from_utf8_lossy(&text);
+            lock(&world).backend.load_program(&text);
+            count.fetch_add(1, Ordering::Relaxed);
+        });
+    }
+}
+
+/// The command the emulator's SimBackend would pass to its robot for these registers (for
+/// tools that inspect the register protocol).
+pub fn decode_registers(inputs: &InputRegisters, map: &RegisterMap) -> Option<JointCommand> {
+    let ib = usize::from(map.int_base);
+    let db = usize::from(map.double_base);
+    let ints = <[i32; INT_REGISTERS]>::try_from(inputs.int.get(ib..ib + INT_REGISTERS)?).ok()?;
+    let doubles =
+        <[f64; DOUBLE_REGISTERS]>::try_from(inputs.double.get(db..db + DOUBLE_REGISTERS)?).ok()?;
+    RegisterMap::decode(&ints, &doubles)
+}

@@ -17,6 +17,12 @@ pub mod emulator;
 pub mod rtde_robot;
 pub mod script;
 
+pub use client::{ClientConfig, RtdeClient};
+pub use dashboard::DashboardClient;
+pub use emulator::{Emulator, EmulatorBackend, EmulatorConfig, SimBackend, TraceBackend};
+pub use rtde_robot::{RtdeRobot, RtdeRobotConfig};
+pub use script::{RegisterMap, ScriptSender};
+
 // --- simulation and traces: SimRobot, ReplayRobot, trace readers/writers ---
 pub mod replay;
 pub mod sim;
@@ -27,6 +33,6 @@ pub use trace::{Trace, TraceReport};
 
 pub use error::{Result, RobotIoError};
 pub use types::{
-    JointCommand, Joints, Robot, RobotState, robot_mode, runtime_state, safety_mode,
-    safety_status_bits,
+    robot_mode, runtime_state, safety_mode, safety_status_bits, JointCommand, Joints, Robot,
+    RobotState,
 };
