@@ -33,6 +33,6 @@ pub use trace::{Trace, TraceReport};
 
 pub use error::{Result, RobotIoError};
 pub use types::{
-    robot_mode, runtime_state, safety_mode, safety_status_bits, JointCommand, Joints, Robot,
-    RobotState,
+    JointCommand, Joints, Robot, RobotState, robot_mode, runtime_state, safety_mode,
+    safety_status_bits,
 };
