@@ -18,7 +18,8 @@
 //!   `max_speed_rad_s × scale` and at the speed from which the joint can still stop at the
 //!   reference with `max_acc_rad_s2` (`√(2·a·|r − q|)`, so it does not overshoot), and its change
 //!   per cycle is limited to `max_acc_rad_s2 · dt`. `lookahead_s` must lie in [0.03, 0.2] and
-//!   `gain` in [100, 2000], as UR's servoj requires.
+//!   `gain` in [100, 2000], as UR's servoj requires; UR calls the gain unitless, this model
+//!   reads it as a bandwidth in [1/s].
 //! - **speedJ** `Speed { qd, acc }`: the target velocity is `qd × scale`, shrunk uniformly (its
 //!   direction kept) so that no joint exceeds `max_speed_rad_s`; the velocity vector ramps
 //!   towards it along a straight line in joint space with the leading joint at
