@@ -102,7 +102,8 @@ fn assess(args: &AssessArgs) -> anyhow::Result<Report> {
     let table_path = staging.path().join(TABLE_FILE);
     let file = fs::File::create(&table_path)
         .with_context(|| format!("cannot create {}", table_path.display()))?;
-    let mut table = IndicatorTable::new(BufWriter::new(file))?;
+    let mut table = IndicatorTable::new(BufWriter::new(file))
+        .with_context(|| format!("cannot write {}", table_path.display()))?;
 
     let progress = progress_bar(frames.len() as u64);
     let mut samples = Vec::with_capacity(frames.len());
@@ -160,7 +161,7 @@ fn assess(args: &AssessArgs) -> anyhow::Result<Report> {
         out: args.out.clone(),
         files,
     };
-    progress.finish_and_clear();
+    drop(progress);
     staging.install(&args.out, args.force)?;
     Ok(report)
 }
@@ -180,10 +181,27 @@ fn read_cues(path: &Path) -> anyhow::Result<Vec<CueFrame>> {
     }
 }
 
+/// A progress bar that is cleared from the terminal when dropped, also on an early error.
+#[derive(Debug)]
+struct Progress(ProgressBar);
+
+impl std::ops::Deref for Progress {
+    type Target = ProgressBar;
+    fn deref(&self) -> &ProgressBar {
+        &self.0
+    }
+}
+
+impl Drop for Progress {
+    fn drop(&mut self) {
+        self.0.finish_and_clear();
+    }
+}
+
 /// A progress bar on stderr, hidden when stderr is not a terminal.
-fn progress_bar(len: u64) -> ProgressBar {
+fn progress_bar(len: u64) -> Progress {
     if !std::io::stderr().is_terminal() {
-        return ProgressBar::hidden();
+        return Progress(ProgressBar::hidden());
     }
     let bar = ProgressBar::new(len);
     if let Ok(style) =
@@ -192,7 +210,7 @@ fn progress_bar(len: u64) -> ProgressBar {
         bar.set_style(style.progress_chars("=> "));
     }
     bar.set_message("assessing");
-    bar
+    Progress(bar)
 }
 
 /// Refuses an `--out` that is a file, or a non-empty folder without `--force`.
