@@ -206,6 +206,9 @@ impl SimBackend {
     /// Wraps `robot`; its program is stopped until our control program arrives.
     pub fn new(mut robot: SimRobot) -> Self {
         robot.stop_program();
+        // One cycle so that an arm at rest is STOPPED (not STOPPING) before any program can
+        // arrive: `play` is refused while stopping.
+        robot.step();
         let mut published = RobotState::default();
         let _ = robot.read_state(&mut published);
         Self {

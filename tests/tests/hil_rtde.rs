@@ -205,12 +205,17 @@ async fn sim_setup(map: RegisterMap, hz: f64) -> (Emulator, RtdeRobot) {
         .unwrap();
     // Wait until the program plays.
     let mut s = RobotState::default();
-    loop {
+    for _ in 0..1000 {
         robot.wait_state(&mut s, SAMPLE_TIMEOUT).await.unwrap();
         if s.runtime_state == runtime_state::PLAYING {
             break;
         }
     }
+    assert_eq!(
+        s.runtime_state,
+        runtime_state::PLAYING,
+        "the program never started"
+    );
     assert_eq!(emu.with_sim(|b| b.program_running()), Some(true));
     (emu, robot)
 }
