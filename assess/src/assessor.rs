@@ -1,5 +1,6 @@
 //! The [`Assessor`]: one frame in, one [`Assessment`] out.
 
+use crate::Vec3;
 use crate::area::{AreaId, AreaRole, Workspace};
 use crate::assessment::{Assessment, Category, Dominant, Indicators};
 use crate::config::AssessConfig;
@@ -8,10 +9,9 @@ use crate::cue::{CueFrame, Hand};
 use crate::dominant::DominantTracker;
 use crate::error::Result;
 use crate::evidence::{hand_evidence, orientation_evidence};
-use crate::filter::OneEuro;
+use crate::filter::OneEuro3;
 use crate::hesitation::SpeedSamples;
 use crate::window::{FrameContribution, Totals, Window};
-use crate::Vec3;
 
 const NS_PER_S: f64 = 1e9;
 
@@ -23,10 +23,10 @@ struct Orientation {
     confidence: f64,
 }
 
-/// Per-hand filter state (§7): three One-Euro filters and the time of the last sample.
+/// Per-hand filter state (§7): a One-Euro filter per axis and the time of the last sample.
 #[derive(Debug, Clone, Copy)]
 struct HandTrack {
-    axes: [OneEuro; 3],
+    filter: OneEuro3,
     last_t: f64,
     /// Filtered speed on the latest frame, when defined [m/s].
     speed: Option<f64>,
@@ -36,26 +36,18 @@ impl HandTrack {
     /// Feed the hand's position on a frame at `t`, or `None` when the hand is missing.
     fn update(&mut self, t: f64, position: Option<Vec3>) {
         let Some(p) = position else {
-            for a in &mut self.axes {
-                a.reset();
-            }
+            self.filter.reset();
             self.speed = None;
             return;
         };
-        if !self.axes[0].is_initialised() {
-            for (a, x) in self.axes.iter_mut().zip(p.iter()) {
-                a.filter(*x, 0.0);
-            }
+        if !self.filter.is_initialised() {
+            self.filter.filter(p.into(), 0.0);
             self.speed = None;
         } else {
             let dt = t - self.last_t;
-            let mut d2 = 0.0;
-            for (a, x) in self.axes.iter_mut().zip(p.iter()) {
-                let before = a.value();
-                let after = a.filter(*x, dt);
-                d2 += (after - before) * (after - before);
-            }
-            let v = d2.sqrt() / dt;
+            let before = Vec3::from(self.filter.value());
+            let after = Vec3::from(self.filter.filter(p.into(), dt));
+            let v = (after - before).norm() / dt;
             self.speed = v.is_finite().then_some(v);
         }
         self.last_t = t;
@@ -80,12 +72,17 @@ pub struct Assessor {
     evidence: Vec<[f64; 3]>,
     /// Fused score S_i per area on the last frame.
     scores: Vec<f64>,
+    /// Distance of the active hand to every area's box on the last frame [m].
+    hand_distance: Vec<f64>,
     hands: [HandTrack; 2],
     /// The last `turn_lookback_frames` valid body frames, (t, yaw), as a ring.
     yaw_ring: Vec<(f64, f64)>,
     yaw_next: usize,
     yaw_len: usize,
-    last_t: Option<f64>,
+    /// Time and rounded absolute time [ns] of the last accepted frame.
+    last_t: Option<(f64, i64)>,
+    /// Δt_max [ns].
+    dt_max_ns: i64,
     seq: u64,
     last_area: Option<AreaId>,
     totals: Totals,
@@ -108,13 +105,14 @@ impl Assessor {
         for a in 0..n {
             for b in 0..n {
                 if a != b {
-                    cost[a * n + b] = pair_cost(&cfg, workspace.role(AreaId(a)), workspace.role(AreaId(b)));
+                    cost[a * n + b] =
+                        pair_cost(&cfg, workspace.role(AreaId(a)), workspace.role(AreaId(b)));
                 }
             }
         }
         let m = cfg.confirmation.window_frames;
         let track = HandTrack {
-            axes: [OneEuro::new(cfg.hesitation.one_euro); 3],
+            filter: OneEuro3::new(cfg.hesitation.one_euro),
             last_t: 0.0,
             speed: None,
         };
@@ -154,11 +152,13 @@ impl Assessor {
             confirm_act: Confirmer::new(n, m),
             evidence: vec![[0.0; 3]; n],
             scores: vec![0.0; n],
+            hand_distance: vec![f64::INFINITY; n],
             hands: [track; 2],
             yaw_ring: vec![(0.0, 0.0); cfg.fusion.turn_lookback_frames],
             yaw_next: 0,
             yaw_len: 0,
             last_t: None,
+            dt_max_ns: (cfg.demand.max_frame_interval_s * NS_PER_S).round() as i64,
             seq: 0,
             last_area: None,
             totals: Totals::new(n),
@@ -204,16 +204,20 @@ impl Assessor {
     /// Assess one frame. O(1) per frame, no allocation.
     pub fn update(&mut self, frame: &CueFrame) -> &Assessment {
         let t = frame.t;
-        if !t.is_finite() || self.last_t.is_some_and(|prev| t <= prev) {
+        if !t.is_finite() || self.last_t.is_some_and(|(prev, _)| t <= prev) {
             self.out.rejected_frames += 1;
             self.out.last_rejected = true;
             return &self.out;
         }
+        // Integrals use differences of absolute times rounded to whole nanoseconds, so the
+        // sum of the Δt over any run of frames equals the run's duration to ±1 ns, with no
+        // rounding error accumulating (e.g. nine frames at 30 fps are exactly 0.3 s).
+        let t_ns = (t * NS_PER_S).round() as i64;
         let dt_ns = match self.last_t {
             None => 0,
-            Some(prev) => ((t - prev).min(self.cfg.demand.max_frame_interval_s) * NS_PER_S).round() as i64,
+            Some((_, prev_ns)) => (t_ns - prev_ns).clamp(0, self.dt_max_ns),
         };
-        self.last_t = Some(t);
+        self.last_t = Some((t, t_ns));
         let seq = self.seq;
         self.seq += 1;
 
@@ -228,7 +232,9 @@ impl Assessor {
         let mut hand_cues = [None; 2];
         for (slot, cue) in hand_cues.iter_mut().zip(frame.hands.iter()) {
             *slot = cue.and_then(|h| {
-                let ok = h.position.iter().all(|v| v.is_finite()) && h.confidence.is_finite() && h.confidence >= c_min;
+                let ok = h.position.iter().all(|v| v.is_finite())
+                    && h.confidence.is_finite()
+                    && h.confidence >= c_min;
                 ok.then_some((h.position, h.confidence.min(1.0)))
             });
         }
@@ -262,10 +268,12 @@ impl Assessor {
         let mut best_per = (0usize, f64::NEG_INFINITY);
         for (i, area) in self.ws.areas().iter().enumerate() {
             let r = &area.representative_centre;
+            let d_hand = hand.map_or(f64::INFINITY, |m| area.shape.distance(&m.0));
+            self.hand_distance[i] = d_hand;
             let e = [
                 head.map_or(0.0, |h| orientation_evidence(&h.facing, &h.position, r)),
                 body.map_or(0.0, |b| orientation_evidence(&b.facing, &b.position, r)),
-                hand.map_or(0.0, |m| hand_evidence(area.shape.distance(&m.0), d_ws)),
+                hand.map_or(0.0, |_| hand_evidence(d_hand, d_ws)),
             ];
             self.evidence[i] = e;
             let s = weights[0] * e[0] + weights[1] * e[1] + weights[2] * e[2];
@@ -282,16 +290,21 @@ impl Assessor {
 
         // --- §3 confirmation (invalid frames are not pushed: F(t) = F(t−1)) ---
         let prev_f = self.confirm.state();
-        let f = if valid { self.confirm.push(raw) } else { prev_f };
+        let f = if valid {
+            self.confirm.push(raw)
+        } else {
+            prev_f
+        };
 
         // --- §5 perceptual and action sub-states ---
         let per_valid = present[0] || present[1];
         let act_valid = present[2];
         if per_valid {
-            self.confirm_per.push((best_per.1 >= tau).then_some(AreaId(best_per.0)));
+            self.confirm_per
+                .push((best_per.1 >= tau).then_some(AreaId(best_per.0)));
         }
-        if let Some((p, _)) = hand {
-            let raw_act = self.action_area(&p);
+        if hand.is_some() {
+            let raw_act = self.action_area();
             self.confirm_act.push(raw_act);
         }
         let f_per = self.confirm_per.state();
@@ -395,7 +408,13 @@ impl Assessor {
             out.switches += 1;
         }
         out.window_overflow = self.window.overflowed;
-        indicators(&self.ws, &self.cfg, &self.totals, &mut out.cumulative, &mut out.area_demand);
+        indicators(
+            &self.ws,
+            &self.cfg,
+            &self.totals,
+            &mut out.cumulative,
+            &mut out.area_demand,
+        );
         indicators(
             &self.ws,
             &self.cfg,
@@ -419,7 +438,7 @@ impl Assessor {
                     self.ws
                         .areas()
                         .iter()
-                        .map(|a| (p - a.representative_centre).norm())
+                        .map(|a| (p - a.representative_centre).norm_squared())
                         .fold(f64::INFINITY, f64::min)
                 };
                 let (dl, dr) = (near(&l), near(&r));
@@ -436,11 +455,11 @@ impl Assessor {
         }
     }
 
-    /// §5: the area containing the hand, else the nearest within d_act, else ∅ (ties: first).
-    fn action_area(&self, p: &Vec3) -> Option<AreaId> {
+    /// §5: the area containing the active hand, else the nearest within d_act, else ∅ (ties:
+    /// first). Uses the distances computed for the evidence on this frame.
+    fn action_area(&self) -> Option<AreaId> {
         let mut nearest: Option<(usize, f64)> = None;
-        for (i, a) in self.ws.areas().iter().enumerate() {
-            let d = a.shape.distance(p);
+        for (i, &d) in self.hand_distance.iter().enumerate() {
             if d == 0.0 {
                 return Some(AreaId(i));
             }
@@ -464,8 +483,13 @@ impl Assessor {
         if self.yaw_len == k {
             // The slot about to be overwritten holds the frame k valid body frames earlier.
             let (t_then, yaw_then) = self.yaw_ring[self.yaw_next];
+            // Both yaws are in [−π, π], so one wrap brings the difference into [−π, π].
             let mut d = yaw - yaw_then;
-            d = (d + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI) - std::f64::consts::PI;
+            if d > std::f64::consts::PI {
+                d -= std::f64::consts::TAU;
+            } else if d < -std::f64::consts::PI {
+                d += std::f64::consts::TAU;
+            }
             let rate = d.abs() / (t - t_then);
             turning = rate > self.cfg.fusion.turn_yaw_rate_deg_s.to_radians();
         } else {
@@ -478,7 +502,8 @@ impl Assessor {
 }
 
 fn orientation(position: Vec3, facing: Vec3, confidence: f64, c_min: f64) -> Option<Orientation> {
-    let finite = position.iter().chain(facing.iter()).all(|v| v.is_finite()) && confidence.is_finite();
+    let finite =
+        position.iter().chain(facing.iter()).all(|v| v.is_finite()) && confidence.is_finite();
     let norm = facing.norm();
     (finite && norm > 1e-9 && confidence >= c_min).then(|| Orientation {
         position,
@@ -498,9 +523,8 @@ fn pair_cost(cfg: &AssessConfig, a: Option<AreaRole>, b: Option<AreaRole>) -> f6
     let s = &cfg.switching;
     match (a, b) {
         (Some(Instruction), Some(Assembly)) | (Some(Assembly), Some(Instruction)) => s.cost_high,
-        (Some(Collaboration), Some(ToolIdentification)) | (Some(ToolIdentification), Some(Collaboration)) => {
-            s.cost_int
-        }
+        (Some(Collaboration), Some(ToolIdentification))
+        | (Some(ToolIdentification), Some(Collaboration)) => s.cost_int,
         _ => s.cost_base,
     }
 }
@@ -514,7 +538,13 @@ fn ratio(num: i64, den: i64) -> f64 {
 }
 
 /// §4–8 from integrals.
-fn indicators(ws: &Workspace, cfg: &AssessConfig, tot: &Totals, out: &mut Indicators, area_demand: &mut [f64]) {
+fn indicators(
+    ws: &Workspace,
+    cfg: &AssessConfig,
+    tot: &Totals,
+    out: &mut Indicators,
+    area_demand: &mut [f64],
+) {
     for (d, &ns) in area_demand.iter_mut().zip(tot.area_ns.iter()) {
         *d = ratio(ns, tot.valid_ns);
     }
@@ -535,7 +565,12 @@ fn indicators(ws: &Workspace, cfg: &AssessConfig, tot: &Totals, out: &mut Indica
     let t_hes = tot.hes_ns as f64 / NS_PER_S;
     out.ohd = (t_hes / (t_collab + cfg.hesitation.epsilon_s)).clamp(0.0, 1.0);
     let w = cfg.composite.weights.to_array();
-    out.hrc_cwl = w.iter().zip(out.components()).map(|(w, x)| w * x).sum::<f64>().clamp(0.0, 1.0);
+    out.hrc_cwl = w
+        .iter()
+        .zip(out.components())
+        .map(|(w, x)| w * x)
+        .sum::<f64>()
+        .clamp(0.0, 1.0);
     out.category = if out.hrc_cwl < cfg.composite.medium_from {
         Category::Low
     } else if out.hrc_cwl < cfg.composite.high_from {

@@ -12,8 +12,9 @@ use crate::config::OneEuroConfig;
 
 /// Smoothing factor of a first-order low-pass with cutoff `cutoff_hz` [Hz] for interval `dt` [s].
 pub fn alpha(cutoff_hz: f64, dt: f64) -> f64 {
-    let tau = 1.0 / (2.0 * std::f64::consts::PI * cutoff_hz);
-    1.0 / (1.0 + tau / dt)
+    // 1 / (1 + τ/Δt) with τ = 1/(2π f_c), written with a single division.
+    let w = 2.0 * std::f64::consts::PI * cutoff_hz * dt;
+    w / (w + 1.0)
 }
 
 /// A scalar One-Euro filter.
@@ -70,6 +71,68 @@ impl OneEuro {
     }
 }
 
+/// Three independent One-Euro filters, one per axis of a position, sharing the per-sample work
+/// that does not depend on the axis (1/Δt and the derivative filter's α). Same arithmetic as
+/// three [`OneEuro`]s, to rounding.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OneEuro3 {
+    params: OneEuroConfig,
+    x_hat: [f64; 3],
+    dx_hat: [f64; 3],
+    initialised: bool,
+}
+
+impl OneEuro3 {
+    /// A filter waiting for its first sample.
+    pub fn new(params: OneEuroConfig) -> Self {
+        Self {
+            params,
+            x_hat: [0.0; 3],
+            dx_hat: [0.0; 3],
+            initialised: false,
+        }
+    }
+
+    /// Forget the state: the next sample re-initialises the filter.
+    pub fn reset(&mut self) {
+        self.initialised = false;
+    }
+
+    /// Whether a sample has initialised the filter since the last reset.
+    pub fn is_initialised(&self) -> bool {
+        self.initialised
+    }
+
+    /// The last filtered value.
+    pub fn value(&self) -> [f64; 3] {
+        self.x_hat
+    }
+
+    /// Filter sample `x` taken `dt` [s] after the previous one (ignored for the first sample;
+    /// must be > 0 otherwise) and return the filtered value.
+    pub fn filter(&mut self, x: [f64; 3], dt: f64) -> [f64; 3] {
+        if !self.initialised {
+            self.x_hat = x;
+            self.dx_hat = [0.0; 3];
+            self.initialised = true;
+            return x;
+        }
+        let two_pi_dt = 2.0 * std::f64::consts::PI * dt;
+        let inv_dt = 1.0 / dt;
+        let w_d = two_pi_dt * self.params.d_cutoff_hz;
+        let a_d = w_d / (w_d + 1.0);
+        for k in 0..3 {
+            let dx = (x[k] - self.x_hat[k]) * inv_dt;
+            self.dx_hat[k] = a_d * dx + (1.0 - a_d) * self.dx_hat[k];
+            let cutoff = self.params.min_cutoff_hz + self.params.beta * self.dx_hat[k].abs();
+            let w = two_pi_dt * cutoff;
+            let a = w / (w + 1.0);
+            self.x_hat[k] = a * x[k] + (1.0 - a) * self.x_hat[k];
+        }
+        self.x_hat
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -88,6 +151,26 @@ mod tests {
         assert!((a1 - 0.385869545).abs() < 1e-9);
         let y = f.filter(1.0, 0.1);
         assert!((y - 0.428422173).abs() < 1e-9, "{y}");
+    }
+
+    #[test]
+    fn vector_filter_equals_three_scalar_filters() {
+        let cfg = OneEuroConfig::default();
+        let mut v = OneEuro3::new(cfg);
+        let mut s = [OneEuro::new(cfg); 3];
+        let mut t_prev = 0.0;
+        for k in 0..500 {
+            // Irregular intervals and a wiggly 3-D path.
+            let t = k as f64 * 0.03 + 0.005 * ((k * 7) % 5) as f64;
+            let x = [(t * 3.0).sin(), (t * 1.3).cos() * 0.2, t * 0.05];
+            let dt = t - t_prev;
+            t_prev = t;
+            let y = v.filter(x, dt);
+            for a in 0..3 {
+                let z = s[a].filter(x[a], dt);
+                assert!((y[a] - z).abs() < 1e-12, "k {k} axis {a}: {} vs {z}", y[a]);
+            }
+        }
     }
 
     #[test]

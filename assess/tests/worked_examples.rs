@@ -207,12 +207,19 @@ fn s2_fusion_with_head_missing_renormalises() {
     close(out.weights[1], 0.571429, 1e-6);
     close(out.weights[2], 0.428571, 1e-6);
     assert_eq!(out.raw, ASS);
-    for (s, want) in a.fused_scores().iter().zip([0.819048, 0.598477, 0.408001, 0.223810]) {
+    for (s, want) in a
+        .fused_scores()
+        .iter()
+        .zip([0.819048, 0.598477, 0.408001, 0.223810])
+    {
         close(*s, want, 1e-6);
     }
 
     // A head cue below c_min = 0.3, or with a NaN inside, is missing: the same weights result.
-    for bad in [head(yaw(-90.0), 0.29), head(Vec3::new(f64::NAN, 0.0, 0.0), 1.0)] {
+    for bad in [
+        head(yaw(-90.0), 0.29),
+        head(Vec3::new(f64::NAN, 0.0, 0.0), 1.0),
+    ] {
         let mut a = assessor(AssessConfig::default());
         let out = a.update(&CueFrame { head: bad, ..f });
         assert!(!out.present[0]);
@@ -288,34 +295,45 @@ fn s2_fusion_during_a_large_torso_turn() {
 
 #[test]
 fn s2_ties_go_to_the_first_listed_area_and_tau_gates() {
-    // Head facing 45° between ass and id: both at 45° → S = 0.75 each; the tie goes to ass,
-    // listed first. Facing 60°: ass 60° → 0.666667, id 30° → 0.833333 → id.
-    // Facing 135° (between id and col): 45° from both → 0.75, tie → id (listed before col).
-    // Facing 180°+45° = 225°: col 45° → 0.75 and ins 45° → 0.75 → ins (listed before col).
+    // Facing (1, 1, 0), exactly between ass and id: both at 45° → S = 0.75 each; the tie goes
+    // to ass, listed first. Facing 60°: ass 60° → 0.666667, id 30° → 0.833333 → id.
+    // Facing (−1, 1, 0) (between id and col): 45° from both → tie → id (listed before col).
+    // Facing (−1, −1, 0): col and ins both at 45° → ins (listed before col).
+    // (Exact ties need exactly symmetric facings: the components are equal in magnitude.)
     // With τ = 0.8 the 45° ties (0.75) are below τ → ∅.
-    let cases = [(45.0, ASS), (60.0, ID), (135.0, ID), (225.0, INS)];
-    for (deg, want) in cases {
+    let cases = [
+        (Vec3::new(1.0, 1.0, 0.0), ASS),
+        (yaw(60.0), ID),
+        (Vec3::new(-1.0, 1.0, 0.0), ID),
+        (Vec3::new(-1.0, -1.0, 0.0), INS),
+    ];
+    for (facing, want) in cases {
         let mut a = assessor(AssessConfig::default());
         let out = a.update(&CueFrame {
-            head: head(yaw(deg), 1.0),
+            head: head(facing, 1.0),
             ..CueFrame::empty(0.0)
         });
-        assert_eq!(out.raw, want, "facing {deg}°");
+        assert_eq!(out.raw, want, "facing {facing:?}");
+        close(
+            out.raw_score,
+            if want == ID && facing.x > 0.0 {
+                0.833333
+            } else {
+                0.75
+            },
+            1e-6,
+        );
     }
     let mut cfg = AssessConfig::default();
     cfg.fusion.tau = 0.8;
     let mut a = assessor(cfg);
     let out = a.update(&CueFrame {
-        head: head(yaw(45.0), 1.0),
+        head: head(Vec3::new(1.0, 1.0, 0.0), 1.0),
         ..CueFrame::empty(0.0)
     });
     assert_eq!(out.raw, None);
     assert!(out.valid, "∅ is still a valid state");
 }
-
-// ---------------------------------------------------------------------------------------------
-// §3 Temporal confirmation
-// ---------------------------------------------------------------------------------------------
 
 #[test]
 fn s3_confirmation_with_m5_including_unassigned_and_invalid_frames() {
@@ -612,7 +630,7 @@ fn s7_ohd_with_gates_t_min_and_adaptive_threshold() {
     let mut x = 0.0;
     let mut log = Vec::new();
     for k in 0..40usize {
-        if k >= 1 && k <= 19 {
+        if (1..=19).contains(&k) {
             x += 0.02;
         }
         let (c, g) = match k {
@@ -630,8 +648,14 @@ fn s7_ohd_with_gates_t_min_and_adaptive_threshold() {
     close(log[24].speed_threshold_m_s, 0.07, 1e-5);
     close(log[15].hand_speed_m_s.unwrap(), 0.2, 1e-4);
     assert!(!log[15].low_motion, "0.2 m/s is above v_th");
-    assert_eq!(log[0].hand_speed_m_s, None, "the first hand frame only initialises the filter");
-    assert_eq!(log[38].hand_speed_m_s, None, "the reappearing hand only re-initialises");
+    assert_eq!(
+        log[0].hand_speed_m_s, None,
+        "the first hand frame only initialises the filter"
+    );
+    assert_eq!(
+        log[38].hand_speed_m_s, None,
+        "the reappearing hand only re-initialises"
+    );
     assert!(log[39].hand_speed_m_s.is_some());
 
     let hes: Vec<bool> = log.iter().map(|o| o.hesitating).collect();
@@ -663,7 +687,12 @@ fn s7_threshold_clamps_to_v_min() {
     let mut a = assessor(transparent_filter());
     let mut last = None;
     for k in 0..20usize {
-        let out = a.update(&hand_frame(k as f64 * 0.1, Some(0.005 * k as f64), true, true));
+        let out = a.update(&hand_frame(
+            k as f64 * 0.1,
+            Some(0.005 * k as f64),
+            true,
+            true,
+        ));
         if k == 10 {
             close(out.speed_threshold_m_s, 0.10, 0.0);
             assert!(out.hesitating);
@@ -709,7 +738,10 @@ fn s7_threshold_median_covers_the_last_10_s() {
     for k in 0..152usize {
         let x = 0.02 * k.min(50) as f64;
         let c = !(51..=130).contains(&k);
-        vth.push(a.update(&hand_frame(k as f64 * 0.1, Some(x), c, true)).speed_threshold_m_s);
+        vth.push(
+            a.update(&hand_frame(k as f64 * 0.1, Some(x), c, true))
+                .speed_threshold_m_s,
+        );
     }
     close(vth[131], 0.07, 1e-5);
     close(vth[151], 0.03, 0.0);

@@ -1,0 +1,183 @@
+//! `Assessor::update` allocates nothing after construction (counting global allocator).
+//!
+//! The counter is per thread, so allocations of the test harness's other threads don't count.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use assess::{
+    AssessConfig, Assessor, BaselineMode, BodyCue, CueFrame, HandCue, HeadCue, RobotContext, Vec3,
+    Workspace,
+};
+
+struct Counting;
+
+thread_local! {
+    static COUNTING: Cell<bool> = const { Cell::new(false) };
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        count();
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+fn count() {
+    // `try_with`: the thread-locals may be gone while a thread shuts down.
+    let _ = COUNTING.try_with(|on| {
+        if on.get() {
+            let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
+        }
+    });
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// A small deterministic generator (no allocation).
+struct Lcg(u64);
+
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+fn frame(k: u64, rng: &mut Lcg) -> CueFrame {
+    // A busy operator: gaze wandering over all areas, torso turning, both hands moving or
+    // resting, dropouts, NaN cues, irregular intervals and gaps, collaboration periods.
+    let t = k as f64 / 30.0 + if k % 97 == 0 { 0.5 } else { 0.0 } + (k / 97) as f64 * 0.5;
+    let phase = k as f64 * 0.07;
+    let gaze = Vec3::new(phase.cos(), phase.sin(), -0.3 + 0.2 * (phase * 3.0).sin());
+    let torso = Vec3::new((phase * 0.5).cos(), (phase * 0.5).sin(), 0.0);
+    let still = (k / 40) % 3 == 1;
+    let (c_left, c_right, c_head) = (rng.next(), rng.next(), rng.next());
+    let hand = |off: f64, confidence: f64| HandCue {
+        position: if still {
+            Vec3::new(0.5 + off, 0.0, 0.8)
+        } else {
+            Vec3::new(0.5 + 0.2 * phase.sin() + off, 0.2 * phase.cos(), 0.8)
+        },
+        confidence,
+    };
+    CueFrame {
+        t,
+        head: (k % 13 != 0).then_some(HeadCue {
+            position: Vec3::new(0.0, 0.0, 1.5),
+            facing: if k % 31 == 0 {
+                Vec3::new(f64::NAN, 0.0, 0.0)
+            } else {
+                gaze
+            },
+            confidence: 0.2 + 0.8 * c_head,
+        }),
+        body: (k % 7 != 0).then_some(BodyCue {
+            position: Vec3::new(0.0, 0.0, 1.3),
+            facing: torso,
+            confidence: 0.9,
+        }),
+        hands: [
+            (k % 50 != 0).then(|| hand(0.0, 0.5 + 0.5 * c_left)),
+            (k % 70 != 0).then(|| hand(0.1, 0.5 + 0.5 * c_right)),
+        ],
+        robot: RobotContext {
+            collaborating: (k / 90) % 2 == 1,
+            incomplete: (k / 60) % 4 != 3,
+        },
+    }
+}
+
+fn workspace() -> Workspace {
+    Workspace::from_toml_str(
+        r#"
+        [[area]]
+        name = "assembly"
+        role = "assembly"
+        min_m = [0.3, -0.3, 0.7]
+        max_m = [0.8, 0.3, 0.9]
+        [[area]]
+        name = "storage"
+        role = "tool_identification"
+        min_m = [-0.2, 0.5, 0.7]
+        max_m = [0.3, 0.9, 0.9]
+        [[area]]
+        name = "instruction"
+        role = "instruction"
+        min_m = [-0.2, -0.9, 1.0]
+        max_m = [0.3, -0.5, 1.5]
+        [[area]]
+        name = "handover"
+        role = "collaboration"
+        centre_m = [0.9, 0.6, 1.0]
+        size_m = [0.3, 0.3, 0.3]
+        yaw_deg = 30
+        "#,
+    )
+    .unwrap()
+}
+
+fn allocations_during(cfg: AssessConfig, frames: u64) -> u64 {
+    let mut a = Assessor::new(workspace(), cfg).unwrap();
+    let mut rng = Lcg(42);
+    ALLOCATIONS.with(|n| n.set(0));
+    COUNTING.with(|on| on.set(true));
+    let mut valid = 0u64;
+    let mut hes = 0u64;
+    let mut dominant = 0u64;
+    for k in 0..frames {
+        let out = a.update(&frame(k, &mut rng));
+        valid += out.valid as u64;
+        hes += out.hesitating as u64;
+        dominant += out.dominant.indicator.is_some() as u64;
+    }
+    COUNTING.with(|on| on.set(false));
+    // The run must have exercised the interesting paths, or the test proves little.
+    assert!(valid > frames / 2, "valid frames: {valid}");
+    assert!(hes > 0, "no hesitation frames");
+    assert!(dominant > 0, "no dominant indicator");
+    ALLOCATIONS.with(|n| n.get())
+}
+
+#[test]
+fn update_allocates_nothing_with_default_config() {
+    // 20 000 frames ≈ 11 min of 30 fps input: the 30 s window and the 10 s median both wrap
+    // many times, and the 60 s calibration ends.
+    assert_eq!(allocations_during(AssessConfig::default(), 20_000), 0);
+}
+
+#[test]
+fn update_allocates_nothing_when_the_window_ring_overflows() {
+    // A window sized for 5 Hz input fed at 30 Hz: the ring overflows on every frame.
+    let mut cfg = AssessConfig::default();
+    cfg.window.max_rate_hz = 5.0;
+    cfg.dominant.baseline_mode = BaselineMode::Fixed;
+    assert_eq!(allocations_during(cfg, 5_000), 0);
+}
+
+#[test]
+fn the_counter_counts() {
+    // Guard against a counter that can't fail: a Vec push inside the counted region counts.
+    ALLOCATIONS.with(|n| n.set(0));
+    COUNTING.with(|on| on.set(true));
+    let v: Vec<u64> = std::hint::black_box(Vec::with_capacity(8));
+    COUNTING.with(|on| on.set(false));
+    drop(v);
+    assert_eq!(ALLOCATIONS.with(|n| n.get()), 1);
+}
