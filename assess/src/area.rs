@@ -24,8 +24,8 @@ use std::path::Path;
 use nalgebra::{Rotation3, Vector3};
 use serde::Deserialize;
 
-use crate::error::{AssessError, Result};
 use crate::Vec3;
+use crate::error::{AssessError, Result};
 
 /// The functional role of an area, which the indicators and switching costs refer to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize)]
@@ -87,7 +87,10 @@ impl AreaBox {
 
     /// An oriented box from its centre [m], full size [m] and yaw about the z axis [rad].
     pub fn new(centre: Vec3, size: Vec3, yaw_rad: f64) -> Result<Self> {
-        if !(centre.iter().all(|v| v.is_finite()) && size.iter().all(|v| v.is_finite()) && yaw_rad.is_finite()) {
+        if !(centre.iter().all(|v| v.is_finite())
+            && size.iter().all(|v| v.is_finite())
+            && yaw_rad.is_finite())
+        {
             return Err(AssessError::invalid("box", "all values must be finite"));
         }
         if size.iter().any(|&s| s <= 0.0) {
@@ -171,12 +174,18 @@ impl Workspace {
     /// Fails when there is no area, a name repeats, a role appears twice, or D_ws is not > 0.
     pub fn new(areas: Vec<Area>, diagonal: Option<f64>) -> Result<Self> {
         if areas.is_empty() {
-            return Err(AssessError::invalid("area", "the workspace needs at least one area"));
+            return Err(AssessError::invalid(
+                "area",
+                "the workspace needs at least one area",
+            ));
         }
         let mut by_role = [None; 4];
         for (i, a) in areas.iter().enumerate() {
             if a.name.trim().is_empty() {
-                return Err(AssessError::invalid(format!("area[{i}].name"), "must not be empty"));
+                return Err(AssessError::invalid(
+                    format!("area[{i}].name"),
+                    "must not be empty",
+                ));
             }
             if areas[..i].iter().any(|b| b.name == a.name) {
                 return Err(AssessError::invalid(
@@ -195,7 +204,10 @@ impl Workspace {
                 if slot.is_some() {
                     return Err(AssessError::invalid(
                         format!("area[{i}].role"),
-                        format!("each role may be given to one area only; `{}` repeats", role.short()),
+                        format!(
+                            "each role may be given to one area only; `{}` repeats",
+                            role.short()
+                        ),
                     ));
                 }
                 *slot = Some(AreaId(i));
@@ -216,7 +228,10 @@ impl Workspace {
             }
         };
         if !(diagonal.is_finite() && diagonal > 0.0) {
-            return Err(AssessError::invalid("diagonal_m", format!("D_ws must be finite and > 0 (got {diagonal})")));
+            return Err(AssessError::invalid(
+                "diagonal_m",
+                format!("D_ws must be finite and > 0 (got {diagonal})"),
+            ));
         }
         Ok(Self {
             areas,
@@ -332,7 +347,10 @@ impl RawWorkspace {
             let shape = match (a.min_m, a.max_m, a.centre_m, a.size_m) {
                 (Some(min), Some(max), None, None) => {
                     if a.yaw_deg.is_some() {
-                        return Err(AssessError::invalid(key("yaw_deg"), "only allowed with centre_m and size_m"));
+                        return Err(AssessError::invalid(
+                            key("yaw_deg"),
+                            "only allowed with centre_m and size_m",
+                        ));
                     }
                     let (min, max) = (Vec3::from(min), Vec3::from(max));
                     if !(min.iter().chain(max.iter()).all(|v| v.is_finite())) {
@@ -352,9 +370,13 @@ impl RawWorkspace {
                 }
                 (None, None, Some(c), Some(s)) => {
                     let yaw = a.yaw_deg.unwrap_or(0.0);
-                    AreaBox::new(Vec3::from(c), Vec3::from(s), yaw.to_radians()).map_err(|e| match e {
-                        AssessError::InvalidValue { rule, .. } => AssessError::invalid(key("size_m"), rule),
-                        other => other,
+                    AreaBox::new(Vec3::from(c), Vec3::from(s), yaw.to_radians()).map_err(|e| {
+                        match e {
+                            AssessError::InvalidValue { rule, .. } => {
+                                AssessError::invalid(key("size_m"), rule)
+                            }
+                            other => other,
+                        }
                     })?
                 }
                 _ => {
@@ -364,7 +386,10 @@ impl RawWorkspace {
                     ));
                 }
             };
-            let representative_centre = a.representative_centre_m.map(Vec3::from).unwrap_or(shape.centre());
+            let representative_centre = a
+                .representative_centre_m
+                .map(Vec3::from)
+                .unwrap_or(shape.centre());
             areas.push(Area {
                 name: a.name,
                 role: a.role,
@@ -394,7 +419,12 @@ mod tests {
     fn distance_to_yawed_box() {
         // A 2 x 0.2 x 0.2 box yawed 90°: its long side lies along y. The point (0, 0.9, 0) is
         // inside; (0.5, 0, 0) is 0.5 - 0.1 = 0.4 m from the side face.
-        let b = AreaBox::new(Vec3::zeros(), Vec3::new(2.0, 0.2, 0.2), std::f64::consts::FRAC_PI_2).unwrap();
+        let b = AreaBox::new(
+            Vec3::zeros(),
+            Vec3::new(2.0, 0.2, 0.2),
+            std::f64::consts::FRAC_PI_2,
+        )
+        .unwrap();
         assert_eq!(b.distance(&Vec3::new(0.0, 0.9, 0.0)), 0.0);
         assert!((b.distance(&Vec3::new(0.5, 0.0, 0.0)) - 0.4).abs() < 1e-12);
     }
@@ -420,14 +450,24 @@ mod tests {
         // z from -0.5 (box b is centred at z = 0) to 1: spans 3.7071, 1.7071, 1.5.
         let h = std::f64::consts::FRAC_1_SQRT_2;
         let expect = ((3.0 + h) * (3.0 + h) + (1.0 + h) * (1.0 + h) + 1.5f64 * 1.5).sqrt();
-        assert!((ws.diagonal() - expect).abs() < 1e-12, "{} vs {expect}", ws.diagonal());
+        assert!(
+            (ws.diagonal() - expect).abs() < 1e-12,
+            "{} vs {expect}",
+            ws.diagonal()
+        );
 
         let err = |s: &str| Workspace::from_toml_str(s).unwrap_err().to_string();
         assert!(err("").contains("at least one area"));
         let e = err("[[area]]\nname='a'\nmin_m=[0,0,0]\nmax_m=[1,0,1]");
-        assert!(e.contains("area[0].max_m") && e.contains("degenerate"), "{e}");
+        assert!(
+            e.contains("area[0].max_m") && e.contains("degenerate"),
+            "{e}"
+        );
         let e = err("[[area]]\nname='a'\ncentre_m=[0,0,0]\nsize_m=[1,0,1]");
-        assert!(e.contains("area[0].size_m") && e.contains("degenerate"), "{e}");
+        assert!(
+            e.contains("area[0].size_m") && e.contains("degenerate"),
+            "{e}"
+        );
         let e = err("[[area]]\nname='a'\nmin_m=[0,0,0]\nmax_m=[1,1,1]\ncolour='red'");
         assert!(e.contains("unknown field") && e.contains("colour"), "{e}");
         let e = err("[[area]]\nname='a'\nrole='col'\nmin_m=[0,0,0]\nmax_m=[1,1,1]");

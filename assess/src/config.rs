@@ -357,15 +357,27 @@ impl AssessConfig {
         unit_closed("fusion.min_confidence", f.min_confidence)?;
         positive("fusion.turn_yaw_rate_deg_s", f.turn_yaw_rate_deg_s)?;
         if f.turn_lookback_frames == 0 {
-            return Err(AssessError::invalid("fusion.turn_lookback_frames", "must be ≥ 1"));
+            return Err(AssessError::invalid(
+                "fusion.turn_lookback_frames",
+                "must be ≥ 1",
+            ));
         }
         if !(f.tau > 0.0 && f.tau <= 1.0) {
-            return Err(AssessError::invalid("fusion.tau", format!("τ must lie in (0, 1] (got {})", f.tau)));
+            return Err(AssessError::invalid(
+                "fusion.tau",
+                format!("τ must lie in (0, 1] (got {})", f.tau),
+            ));
         }
         if self.confirmation.window_frames == 0 {
-            return Err(AssessError::invalid("confirmation.window_frames", "M must be ≥ 1 (got 0)"));
+            return Err(AssessError::invalid(
+                "confirmation.window_frames",
+                "M must be ≥ 1 (got 0)",
+            ));
         }
-        positive("demand.max_frame_interval_s", self.demand.max_frame_interval_s)?;
+        positive(
+            "demand.max_frame_interval_s",
+            self.demand.max_frame_interval_s,
+        )?;
         non_negative("demand.action_radius_m", self.demand.action_radius_m)?;
         let s = &self.switching;
         for (k, v) in [
@@ -392,7 +404,10 @@ impl AssessConfig {
             ));
         }
         let h = &self.hesitation;
-        positive("hesitation.one_euro.min_cutoff_hz", h.one_euro.min_cutoff_hz)?;
+        positive(
+            "hesitation.one_euro.min_cutoff_hz",
+            h.one_euro.min_cutoff_hz,
+        )?;
         non_negative("hesitation.one_euro.beta", h.one_euro.beta)?;
         positive("hesitation.one_euro.d_cutoff_hz", h.one_euro.d_cutoff_hz)?;
         non_negative("hesitation.k_v", h.k_v)?;
@@ -400,7 +415,10 @@ impl AssessConfig {
         if !(h.v_max_m_s.is_finite() && h.v_max_m_s >= h.v_min_m_s) {
             return Err(AssessError::invalid(
                 "hesitation.v_max_m_s",
-                format!("must be finite and ≥ v_min_m_s (got {} < {})", h.v_max_m_s, h.v_min_m_s),
+                format!(
+                    "must be finite and ≥ v_min_m_s (got {} < {})",
+                    h.v_max_m_s, h.v_min_m_s
+                ),
             ));
         }
         positive("hesitation.median_horizon_s", h.median_horizon_s)?;
@@ -466,12 +484,18 @@ pub const COMPONENT_KEYS: [&str; 5] = ["aed", "tid", "icd", "asd", "ohd"];
 fn check_weights(key: &str, w: &CueWeights) -> Result<()> {
     for (name, v) in [("head", w.head), ("body", w.body), ("hand", w.hand)] {
         if !(v.is_finite() && v >= 0.0) {
-            return Err(AssessError::invalid(format!("{key}.{name}"), format!("weights must be ≥ 0 (got {v})")));
+            return Err(AssessError::invalid(
+                format!("{key}.{name}"),
+                format!("weights must be ≥ 0 (got {v})"),
+            ));
         }
     }
     let sum = w.head + w.body + w.hand;
     if (sum - 1.0).abs() > 1e-9 {
-        return Err(AssessError::invalid(key, format!("weights must sum to 1 within 1e-9 (got {sum})")));
+        return Err(AssessError::invalid(
+            key,
+            format!("weights must sum to 1 within 1e-9 (got {sum})"),
+        ));
     }
     Ok(())
 }
@@ -480,7 +504,10 @@ fn finite(key: &str, v: f64) -> Result<()> {
     if v.is_finite() {
         Ok(())
     } else {
-        Err(AssessError::invalid(key, format!("must be finite (got {v})")))
+        Err(AssessError::invalid(
+            key,
+            format!("must be finite (got {v})"),
+        ))
     }
 }
 
@@ -488,7 +515,10 @@ fn positive(key: &str, v: f64) -> Result<()> {
     if v.is_finite() && v > 0.0 {
         Ok(())
     } else {
-        Err(AssessError::invalid(key, format!("must be finite and > 0 (got {v})")))
+        Err(AssessError::invalid(
+            key,
+            format!("must be finite and > 0 (got {v})"),
+        ))
     }
 }
 
@@ -496,7 +526,10 @@ fn non_negative(key: &str, v: f64) -> Result<()> {
     if v.is_finite() && v >= 0.0 {
         Ok(())
     } else {
-        Err(AssessError::invalid(key, format!("must be finite and ≥ 0 (got {v})")))
+        Err(AssessError::invalid(
+            key,
+            format!("must be finite and ≥ 0 (got {v})"),
+        ))
     }
 }
 
@@ -504,6 +537,9 @@ fn unit_closed(key: &str, v: f64) -> Result<()> {
     if (0.0..=1.0).contains(&v) {
         Ok(())
     } else {
-        Err(AssessError::invalid(key, format!("must lie in [0, 1] (got {v})")))
+        Err(AssessError::invalid(
+            key,
+            format!("must lie in [0, 1] (got {v})"),
+        ))
     }
 }

@@ -49,26 +49,26 @@
 //! ```
 
 mod area;
-mod confirm;
-mod dominant;
-mod hesitation;
-mod window;
 mod assessment;
 mod assessor;
 mod config;
+mod confirm;
 mod cue;
+mod dominant;
 mod error;
 pub mod evidence;
 pub mod filter;
+mod hesitation;
 pub mod io;
+mod window;
 
 pub use area::{Area, AreaBox, AreaId, AreaRole, Workspace};
 pub use assessment::{Assessment, Category, Dominant, Indicator, Indicators};
 pub use assessor::Assessor;
 pub use config::{
-    AssessConfig, BaselineMode, ComponentValues, CompositeConfig, ConfirmationConfig, CueWeights,
-    DemandConfig, DominantConfig, FusionConfig, HesitationConfig, OneEuroConfig, SwitchingConfig,
-    WindowConfig, COMPONENT_KEYS,
+    AssessConfig, BaselineMode, COMPONENT_KEYS, ComponentValues, CompositeConfig,
+    ConfirmationConfig, CueWeights, DemandConfig, DominantConfig, FusionConfig, HesitationConfig,
+    OneEuroConfig, SwitchingConfig, WindowConfig,
 };
 pub use cue::{BodyCue, CueFrame, Hand, HandCue, HeadCue, RobotContext};
 pub use error::{AssessError, Result};

@@ -66,19 +66,28 @@ fn confidence() -> impl Strategy<Value = f64> {
 }
 
 /// A frame with arbitrary (possibly non-finite, missing or contradictory) content.
-type Cues = (Option<HeadCue>, Option<BodyCue>, [Option<HandCue>; 2], RobotContext);
+type Cues = (
+    Option<HeadCue>,
+    Option<BodyCue>,
+    [Option<HandCue>; 2],
+    RobotContext,
+);
 
 fn any_cues() -> BoxedStrategy<Cues> {
-    let head = proptest::option::of((any_vec3(), any_vec3(), confidence()).prop_map(|(p, f, c)| HeadCue {
-        position: p,
-        facing: f,
-        confidence: c,
-    }));
-    let body = proptest::option::of((any_vec3(), any_vec3(), confidence()).prop_map(|(p, f, c)| BodyCue {
-        position: p,
-        facing: f,
-        confidence: c,
-    }));
+    let head = proptest::option::of((any_vec3(), any_vec3(), confidence()).prop_map(
+        |(p, f, c)| HeadCue {
+            position: p,
+            facing: f,
+            confidence: c,
+        },
+    ));
+    let body = proptest::option::of((any_vec3(), any_vec3(), confidence()).prop_map(
+        |(p, f, c)| BodyCue {
+            position: p,
+            facing: f,
+            confidence: c,
+        },
+    ));
     let hand = || {
         proptest::option::of((any_vec3(), confidence()).prop_map(|(p, c)| HandCue {
             position: p,
@@ -89,7 +98,13 @@ fn any_cues() -> BoxedStrategy<Cues> {
         collaborating: c,
         incomplete: g,
     });
-    (head.boxed(), body.boxed(), [hand().boxed(), hand().boxed()], robot).boxed()
+    (
+        head.boxed(),
+        body.boxed(),
+        [hand().boxed(), hand().boxed()],
+        robot,
+    )
+        .boxed()
 }
 
 /// Frame intervals: mostly regular, some irregular, some gaps > Δt_max, some repeats.
@@ -156,7 +171,10 @@ fn all_finite(a: &Assessment) -> bool {
         && a.raw_score.is_finite()
         && a.speed_threshold_m_s.is_finite()
         && a.hand_speed_m_s.is_none_or(f64::is_finite)
-        && a.area_demand.iter().chain(&a.area_demand_windowed).all(|v| v.is_finite())
+        && a.area_demand
+            .iter()
+            .chain(&a.area_demand_windowed)
+            .all(|v| v.is_finite())
         && a.dominant.strength.is_finite()
         && a.dominant.held_for_s.is_finite()
         && a.dominant.contributions.iter().all(|v| v.is_finite())
@@ -256,15 +274,20 @@ struct Segment {
 
 fn segments() -> impl Strategy<Value = Vec<Segment>> {
     proptest::collection::vec(
-        (0usize..5, 30usize..120, any::<bool>(), any::<bool>(), any::<bool>()).prop_map(
-            |(target, frames30, moving, c, g)| Segment {
+        (
+            0usize..5,
+            30usize..120,
+            any::<bool>(),
+            any::<bool>(),
+            any::<bool>(),
+        )
+            .prop_map(|(target, frames30, moving, c, g)| Segment {
                 target,
                 duration: frames30 as f64 / 30.0,
                 moving,
                 collaborating: c,
                 incomplete: g,
-            },
-        ),
+            }),
         2..8,
     )
 }
@@ -296,7 +319,11 @@ fn behaviour(segs: &[Segment], t: f64) -> CueFrame {
         Vec3::new(0.6, 0.6, 0.6)
     } else if seg.moving {
         // A 5 cm circle at 4 rad/s: 0.2 m/s, inside the 0.3 m box.
-        Vec3::new(c.x + 0.05 * (4.0 * local).cos(), c.y + 0.05 * (4.0 * local).sin(), c.z)
+        Vec3::new(
+            c.x + 0.05 * (4.0 * local).cos(),
+            c.y + 0.05 * (4.0 * local).sin(),
+            c.z,
+        )
     } else {
         c
     };
