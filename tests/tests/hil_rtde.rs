@@ -711,3 +711,68 @@ async fn dashboard_drives_the_sim_and_reports_safety() {
     .await
     .expect("test timed out");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn emulator_drops_a_client_that_stops_reading() {
+    use robot_io::codec::ClientPackage;
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    tokio::time::timeout(TEST_TIMEOUT, async {
+        let robot = SimRobot::new(SimConfig::ur5e()).unwrap();
+        let cfg = EmulatorConfig {
+            speedup: 20,
+            stall_timeout: Duration::from_millis(300),
+            queue_packages: 20,
+            ..EmulatorConfig::ephemeral()
+        };
+        let emu = Emulator::start(cfg, Box::new(SimBackend::new(robot)))
+            .await
+            .unwrap();
+        // A hand-rolled client: set up a large recipe, start, then never read again.
+        let mut s = tokio::net::TcpStream::connect(emu.rtde_addr())
+            .await
+            .unwrap();
+        let names = [
+            "actual_q",
+            "actual_qd",
+            "target_q",
+            "target_qd",
+            "actual_TCP_pose",
+            "actual_TCP_speed",
+        ]
+        .repeat(8)
+        .join(",");
+        let mut out = Vec::new();
+        ClientPackage::RequestProtocolVersion { version: 2 }
+            .encode(&mut out)
+            .unwrap();
+        ClientPackage::SetupOutputs {
+            frequency_hz: 500.0,
+            names: &names,
+        }
+        .encode(&mut out)
+        .unwrap();
+        ClientPackage::Start.encode(&mut out).unwrap();
+        s.write_all(&out).await.unwrap();
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+        while emu.rtde_sessions() > 0 {
+            assert!(
+                tokio::time::Instant::now() < deadline,
+                "the stalled client was never dropped"
+            );
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        // Reading now drains what was buffered and then hits the closed connection.
+        let mut sink = vec![0u8; 1 << 16];
+        let mut total = 0usize;
+        loop {
+            match tokio::time::timeout(Duration::from_secs(10), s.read(&mut sink)).await {
+                Ok(Ok(0)) | Ok(Err(_)) => break,
+                Ok(Ok(n)) => total += n,
+                Err(_) => panic!("connection still open after the drop"),
+            }
+        }
+        assert!(total > 0);
+    })
+    .await
+    .expect("test timed out");
+}
