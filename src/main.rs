@@ -22,6 +22,15 @@ enum Command {
     Record(robot_cmd::RecordArgs),
     /// Serve a UR controller emulator (RTDE, dashboard, script ports) on loopback.
     Emulate(robot_cmd::EmulateArgs),
+    /// Print configuration files.
+    Config(ConfigArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct ConfigArgs {
+    /// Print the assessment model's default configuration (MODEL.md) as TOML.
+    #[arg(long)]
+    print_default: bool,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -36,5 +45,10 @@ fn main() -> anyhow::Result<()> {
         Command::Assess(args) => assess_cmd::run(args),
         Command::Record(args) => robot_cmd::record(args),
         Command::Emulate(args) => robot_cmd::emulate(args),
+        Command::Config(args) => {
+            anyhow::ensure!(args.print_default, "nothing to do: pass --print-default");
+            print!("{}", assess::AssessConfig::default().to_toml_string());
+            Ok(())
+        }
     }
 }

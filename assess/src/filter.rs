@@ -121,13 +121,13 @@ impl OneEuro3 {
         let inv_dt = 1.0 / dt;
         let w_d = two_pi_dt * self.params.d_cutoff_hz;
         let a_d = w_d / (w_d + 1.0);
-        for k in 0..3 {
-            let dx = (x[k] - self.x_hat[k]) * inv_dt;
-            self.dx_hat[k] = a_d * dx + (1.0 - a_d) * self.dx_hat[k];
-            let cutoff = self.params.min_cutoff_hz + self.params.beta * self.dx_hat[k].abs();
+        for ((x, x_hat), dx_hat) in x.iter().zip(&mut self.x_hat).zip(&mut self.dx_hat) {
+            let dx = (x - *x_hat) * inv_dt;
+            *dx_hat = a_d * dx + (1.0 - a_d) * *dx_hat;
+            let cutoff = self.params.min_cutoff_hz + self.params.beta * dx_hat.abs();
             let w = two_pi_dt * cutoff;
             let a = w / (w + 1.0);
-            self.x_hat[k] = a * x[k] + (1.0 - a) * self.x_hat[k];
+            *x_hat = a * x + (1.0 - a) * *x_hat;
         }
         self.x_hat
     }

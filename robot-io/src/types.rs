@@ -120,7 +120,8 @@ impl RobotState {
             | safety_status_bits::EMERGENCY_STOP
             | safety_status_bits::STOPPED_DUE_TO_SAFETY;
         self.safety_status_bits & stop_bits != 0
-            || !(self.safety_mode == safety_mode::NORMAL || self.safety_mode == safety_mode::REDUCED)
+            || !(self.safety_mode == safety_mode::NORMAL
+                || self.safety_mode == safety_mode::REDUCED)
     }
 }
 
