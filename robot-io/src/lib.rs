@@ -23,6 +23,9 @@ pub use emulator::{Emulator, EmulatorBackend, EmulatorConfig, SimBackend, TraceB
 pub use rtde_robot::{RtdeRobot, RtdeRobotConfig};
 pub use script::{RegisterMap, ScriptSender};
 
+// --- kinematics (UR5e FK and Jacobians; used by sim, adapt and safety) ---
+pub mod kinematics;
+
 // --- simulation and traces: SimRobot, ReplayRobot, trace readers/writers ---
 pub mod replay;
 pub mod sim;

@@ -1,0 +1,1 @@
+//! (issue 4: handover task and the 500 Hz controller; being written)

@@ -1,0 +1,1 @@
+//! (issue 4: kinematics and trajectory generation; being written)

@@ -1,0 +1,1 @@
+//! (issue 4: separation monitoring and QP speed scaling; being written)
