@@ -25,6 +25,9 @@ pub use script::{RegisterMap, ScriptSender};
 
 // --- kinematics (UR5e FK and Jacobians; used by sim, adapt and safety) ---
 pub mod kinematics;
+pub use kinematics::{
+    ControlPoint, ControlPointState, ControlPoints, flange_pose, link_frames, tcp_pose,
+};
 
 // --- simulation and traces: SimRobot, ReplayRobot, trace readers/writers ---
 pub mod replay;

@@ -93,12 +93,9 @@ use crate::{Result, RobotIoError};
 /// The controller cycle [s]: 2 ms (500 Hz).
 pub const CYCLE_S: f64 = 0.002;
 
-/// UR5e standard DH parameter d [m], base to wrist 3.
-pub const UR5E_DH_D: Joints = [0.1625, 0.0, 0.0, 0.1333, 0.0997, 0.0996];
-/// UR5e standard DH parameter a [m].
-pub const UR5E_DH_A: Joints = [0.0, -0.425, -0.3922, 0.0, 0.0, 0.0];
-/// UR5e standard DH parameter alpha [rad].
-pub const UR5E_DH_ALPHA: Joints = [FRAC_PI_2, 0.0, 0.0, FRAC_PI_2, -FRAC_PI_2, 0.0];
+pub use crate::kinematics::{
+    Mat3, UR5E_DH_A, UR5E_DH_ALPHA, UR5E_DH_D, rotation_vector, ur5e_tcp_pose, ur5e_tcp_transform,
+};
 
 /// Accepted servoj lookahead time range [s] (UR's servoj).
 pub const SERVO_LOOKAHEAD_RANGE_S: (f64, f64) = (0.03, 0.2);
@@ -802,9 +799,6 @@ fn validate_command(cmd: &JointCommand) -> Result<()> {
     Ok(())
 }
 
-/// A 3×3 rotation matrix, row-major [-].
-pub type Mat3 = [[f64; 3]; 3];
-
 const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
 fn mat_mul(a: &Mat3, b: &Mat3) -> Mat3 {
@@ -821,101 +815,12 @@ fn mat_mul(a: &Mat3, b: &Mat3) -> Mat3 {
     out
 }
 
-fn mat_vec(a: &Mat3, v: &[f64; 3]) -> [f64; 3] {
-    a.map(|row| row[0] * v[0] + row[1] * v[1] + row[2] * v[2])
-}
-
 fn transpose(a: &Mat3) -> Mat3 {
     [
         [a[0][0], a[1][0], a[2][0]],
         [a[0][1], a[1][1], a[2][1]],
         [a[0][2], a[1][2], a[2][2]],
     ]
-}
-
-/// The rotation vector (axis × angle [rad], angle in [0, π]) of a rotation matrix.
-pub fn rotation_vector(r: &Mat3) -> [f64; 3] {
-    let v = [r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1]];
-    let sin2 = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(); // 2 sin θ
-    let cos2 = r[0][0] + r[1][1] + r[2][2] - 1.0; // 2 cos θ
-    let angle = sin2.atan2(cos2);
-    if angle < 1e-12 {
-        // First order: R ≈ I + [ω]×.
-        return [v[0] / 2.0, v[1] / 2.0, v[2] / 2.0];
-    }
-    if angle < PI - 1e-4 {
-        let k = angle / sin2;
-        return [v[0] * k, v[1] * k, v[2] * k];
-    }
-    // Near π: the axis from the symmetric part, R + I ≈ 2 n nᵀ; pick the largest diagonal.
-    let d = [r[0][0], r[1][1], r[2][2]];
-    let mut axis = if d[0] >= d[1] && d[0] >= d[2] {
-        let x = ((d[0] + 1.0) / 2.0).max(0.0).sqrt();
-        [
-            x,
-            (r[0][1] + r[1][0]) / (4.0 * x),
-            (r[0][2] + r[2][0]) / (4.0 * x),
-        ]
-    } else if d[1] >= d[2] {
-        let y = ((d[1] + 1.0) / 2.0).max(0.0).sqrt();
-        [
-            (r[0][1] + r[1][0]) / (4.0 * y),
-            y,
-            (r[1][2] + r[2][1]) / (4.0 * y),
-        ]
-    } else {
-        let z = ((d[2] + 1.0) / 2.0).max(0.0).sqrt();
-        [
-            (r[0][2] + r[2][0]) / (4.0 * z),
-            (r[1][2] + r[2][1]) / (4.0 * z),
-            z,
-        ]
-    };
-    let norm = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
-    // Orient the axis with the (small but signed) antisymmetric part.
-    let sign = if axis[0] * v[0] + axis[1] * v[1] + axis[2] * v[2] < 0.0 {
-        -1.0
-    } else {
-        1.0
-    };
-    for a in &mut axis {
-        *a *= sign * angle / norm;
-    }
-    axis
-}
-
-/// UR5e forward kinematics with the standard UR DH convention
-/// (`T_i = Rz(θ_i)·Tz(d_i)·Tx(a_i)·Rx(α_i)`, parameters [`UR5E_DH_D`], [`UR5E_DH_A`],
-/// [`UR5E_DH_ALPHA`]): the flange (tool0, no TCP offset) in the base frame, as a rotation
-/// matrix and a position [m].
-pub fn ur5e_tcp_transform(q: &Joints) -> (Mat3, [f64; 3]) {
-    let mut rot = IDENTITY;
-    let mut pos = [0.0; 3];
-    for ((&theta, &d), (&a, &alpha)) in q
-        .iter()
-        .zip(&UR5E_DH_D)
-        .zip(UR5E_DH_A.iter().zip(&UR5E_DH_ALPHA))
-    {
-        let (st, ct) = theta.sin_cos();
-        let (sa, ca) = alpha.sin_cos();
-        let link: Mat3 = [
-            [ct, -st * ca, st * sa],
-            [st, ct * ca, -ct * sa],
-            [0.0, sa, ca],
-        ];
-        let offset = mat_vec(&rot, &[a * ct, a * st, d]);
-        pos = [pos[0] + offset[0], pos[1] + offset[1], pos[2] + offset[2]];
-        rot = mat_mul(&rot, &link);
-    }
-    (rot, pos)
-}
-
-/// UR5e flange pose for joint positions `q` [rad]: position [m] and rotation vector [rad] in
-/// the base frame, as in RTDE's `actual_TCP_pose` with no TCP offset configured.
-pub fn ur5e_tcp_pose(q: &Joints) -> [f64; 6] {
-    let (rot, pos) = ur5e_tcp_transform(q);
-    let rv = rotation_vector(&rot);
-    [pos[0], pos[1], pos[2], rv[0], rv[1], rv[2]]
 }
 
 #[cfg(test)]
