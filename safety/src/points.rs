@@ -8,10 +8,12 @@
 //! TCP configured). The points lie on the DH lines; link radius and tool size are covered by
 //! the separation's Z_r term and the workspace box's margins.
 //!
-//! The DH parameters come from `robot_io::sim` (UR's published UR5e values).
+//! Forward kinematics is `robot_io::kinematics` (UR's published UR5e DH parameters), the
+//! same model `SimRobot` and `adapt` use.
 
+use nalgebra::Isometry3;
 use robot_io::Joints;
-use robot_io::sim::{UR5E_DH_A, UR5E_DH_ALPHA, UR5E_DH_D};
+use robot_io::kinematics::{ControlPoint, FRAME_COUNT, link_frames};
 
 /// A watched point on the arm.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -51,69 +53,31 @@ impl ArmPoints {
     }
 }
 
-type Mat3 = [[f64; 3]; 3];
+/// A point of NaNs, for a frame that is missing (never, for a 7-frame chain); every check
+/// treats it as a violation.
+const MISSING: [f64; 3] = [f64::NAN; 3];
 
-const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-
-fn mat_mul(a: &Mat3, b: &Mat3) -> Mat3 {
-    let [[a00, a01, a02], [a10, a11, a12], [a20, a21, a22]] = *a;
-    let [[b00, b01, b02], [b10, b11, b12], [b20, b21, b22]] = *b;
-    [
-        [
-            a00 * b00 + a01 * b10 + a02 * b20,
-            a00 * b01 + a01 * b11 + a02 * b21,
-            a00 * b02 + a01 * b12 + a02 * b22,
-        ],
-        [
-            a10 * b00 + a11 * b10 + a12 * b20,
-            a10 * b01 + a11 * b11 + a12 * b21,
-            a10 * b02 + a11 * b12 + a12 * b22,
-        ],
-        [
-            a20 * b00 + a21 * b10 + a22 * b20,
-            a20 * b01 + a21 * b11 + a22 * b21,
-            a20 * b02 + a21 * b12 + a22 * b22,
-        ],
-    ]
-}
-
-fn mat_vec(a: &Mat3, v: &[f64; 3]) -> [f64; 3] {
-    let [[a00, a01, a02], [a10, a11, a12], [a20, a21, a22]] = *a;
-    let [x, y, z] = *v;
-    [
-        a00 * x + a01 * y + a02 * z,
-        a10 * x + a11 * y + a12 * z,
-        a20 * x + a21 * y + a22 * z,
-    ]
-}
-
-/// Positions of the TCP, wrist and elbow [m] for joint positions `q` [rad]. Allocates
-/// nothing; non-finite `q` gives non-finite points (which every check treats as a violation).
-pub fn arm_points(q: &Joints) -> ArmPoints {
-    let mut rot = IDENTITY;
-    let mut pos = [0.0; 3];
-    let mut origins = [[0.0; 3]; 6];
-    let links = q
-        .iter()
-        .zip(&UR5E_DH_D)
-        .zip(UR5E_DH_A.iter().zip(&UR5E_DH_ALPHA));
-    for (origin, ((&theta, &d), (&a, &alpha))) in origins.iter_mut().zip(links) {
-        let (st, ct) = theta.sin_cos();
-        let (sa, ca) = alpha.sin_cos();
-        let link: Mat3 = [
-            [ct, -st * ca, st * sa],
-            [st, ct * ca, -ct * sa],
-            [0.0, sa, ca],
-        ];
-        let [ox, oy, oz] = mat_vec(&rot, &[a * ct, a * st, d]);
-        let [px, py, pz] = pos;
-        pos = [px + ox, py + oy, pz + oz];
-        rot = mat_mul(&rot, &link);
-        *origin = pos;
+fn origin(frames: &[Isometry3<f64>; FRAME_COUNT], frame: usize) -> [f64; 3] {
+    match frames.get(frame) {
+        Some(t) => {
+            let v = t.translation.vector;
+            [v.x, v.y, v.z]
+        }
+        None => MISSING,
     }
-    // origins[i] is the origin of frame i + 1.
-    let [_, elbow, wrist, _, _, tcp] = origins;
-    ArmPoints { tcp, wrist, elbow }
+}
+
+/// Positions of the TCP, wrist and elbow [m] for joint positions `q` [rad], from
+/// `robot_io::kinematics::link_frames`. Allocates nothing; non-finite `q` gives non-finite
+/// points (which every check treats as a violation).
+pub fn arm_points(q: &Joints) -> ArmPoints {
+    let mut frames = [Isometry3::identity(); FRAME_COUNT];
+    link_frames(q, &mut frames);
+    ArmPoints {
+        tcp: origin(&frames, ControlPoint::Tcp.link()),
+        wrist: origin(&frames, ControlPoint::Wrist.link()),
+        elbow: origin(&frames, ControlPoint::Elbow.link()),
+    }
 }
 
 /// Euclidean distance between two points [m].
@@ -126,7 +90,7 @@ pub fn distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use robot_io::sim::ur5e_tcp_pose;
+    use robot_io::kinematics::ur5e_tcp_pose;
 
     #[test]
     fn tcp_matches_robot_io_forward_kinematics() {
