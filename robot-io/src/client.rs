@@ -39,7 +39,7 @@ pub struct ClientConfig {
     pub host: String,
     /// RTDE port (30004 on a controller).
     pub port: u16,
-    /// Requested output frequency [Hz], in (0, 500] (125 Hz at most on CB3).
+    /// Requested output frequency \[Hz\], in (0, 500] (125 Hz at most on CB3).
     pub frequency_hz: f64,
     /// Output field names (any RTDE outputs).
     pub output_fields: Vec<String>,
@@ -204,7 +204,9 @@ struct Status {
     state: LinkState,
     epoch: u64,
     controller_version: ControllerVersion,
-    fatal: Option<String>,
+    /// Why the client is closed, once it is (built at connect, so reporting it never
+    /// allocates).
+    closed_reason: Arc<str>,
     last_message: Option<String>,
 }
 
@@ -519,7 +521,7 @@ impl RtdeClient {
                 state: LinkState::Up,
                 epoch: 0,
                 controller_version: conn.version,
-                fatal: None,
+                closed_reason: Arc::from("the client is closed"),
                 last_message: None,
             }),
             streaming: AtomicBool::new(false),
@@ -585,8 +587,8 @@ impl RtdeClient {
 
     async fn command(&self, make: fn(oneshot::Sender<Result<()>>) -> Command) -> Result<()> {
         let (tx, rx) = oneshot::channel();
-        let closed = || RobotIoError::LinkDown {
-            reason: "the client is closed".into(),
+        let closed = || RobotIoError::LinkClosed {
+            reason: lock(&self.shared.status).closed_reason.clone(),
         };
         self.commands.send(make(tx)).await.map_err(|_| closed())?;
         rx.await.map_err(|_| closed())?
@@ -602,17 +604,12 @@ impl RtdeClient {
         self.command(Command::Pause).await
     }
 
-    fn fatal(&self) -> Option<RobotIoError> {
+    /// [`RobotIoError::LinkClosed`] once the client is closed for good. Never allocates.
+    pub(crate) fn fatal(&self) -> Option<RobotIoError> {
         let s = lock(&self.shared.status);
-        match (&s.fatal, s.state) {
-            (Some(reason), _) => Some(RobotIoError::LinkDown {
-                reason: reason.clone(),
-            }),
-            (None, LinkState::Closed) => Some(RobotIoError::LinkDown {
-                reason: "the client is closed".into(),
-            }),
-            _ => None,
-        }
+        (s.state == LinkState::Closed).then(|| RobotIoError::LinkClosed {
+            reason: s.closed_reason.clone(),
+        })
     }
 
     /// Copies the next unread sample into `out`, if any. Never blocks, never allocates.
@@ -853,7 +850,7 @@ async fn await_reply(
             }
             Ok(None) => {
                 return Err(RobotIoError::LinkDown {
-                    reason: format!("link lost waiting for the {what} reply"),
+                    reason: format!("link lost waiting for the {what} reply").into(),
                 });
             }
             Ok(Some(ControllerReply::Start(a))) if want_start => {
@@ -972,7 +969,7 @@ async fn supervise(shared: Arc<Shared>, first: Connection, mut commands: mpsc::R
         if !shared.cfg.reconnect {
             let mut s = lock(&shared.status);
             s.state = LinkState::Closed;
-            s.fatal = Some(format!("link lost ({reason}), reconnecting disabled"));
+            s.closed_reason = Arc::from(format!("link lost ({reason}), reconnecting disabled"));
             drop(s);
             shared.data_ready.notify_waiters();
             return;
@@ -1000,7 +997,7 @@ async fn supervise(shared: Arc<Shared>, first: Connection, mut commands: mpsc::R
                     tracing::error!("rtde reconnect failed for good: {e}");
                     let mut s = lock(&shared.status);
                     s.state = LinkState::Closed;
-                    s.fatal = Some(e.to_string());
+                    s.closed_reason = Arc::from(e.to_string());
                     drop(s);
                     shared.data_ready.notify_waiters();
                     return;

@@ -1,5 +1,8 @@
 //! The crate's error type.
 
+use std::borrow::Cow;
+use std::sync::Arc;
+
 /// Errors of the `robot-io` crate.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -18,9 +21,9 @@ pub enum RobotIoError {
     Truncated {
         /// What was being decoded.
         what: &'static str,
-        /// Bytes needed [B].
+        /// Bytes needed \[B\].
         needed: usize,
-        /// Bytes available [B].
+        /// Bytes available \[B\].
         available: usize,
     },
     /// A package violates the RTDE wire format.
@@ -96,14 +99,24 @@ pub enum RobotIoError {
     Timeout {
         /// What was awaited.
         what: &'static str,
-        /// How long we waited [ms].
+        /// How long we waited \[ms\].
         after_ms: u64,
     },
-    /// The RTDE link is down (and is being re-established, or was closed).
+    /// The RTDE link is down for now: lost and being re-established, or no sample received
+    /// yet. Built without allocating (the real-time path returns it), so `reason` is a static
+    /// text in the hot path.
     #[error("rtde link down: {reason}")]
     LinkDown {
         /// Why.
-        reason: String,
+        reason: Cow<'static, str>,
+    },
+    /// The RTDE client is closed for good: closed by its owner, lost with reconnecting
+    /// disabled, or a reconnect that cannot succeed (the fields or versions changed). The
+    /// reason is shared, so returning this error again does not allocate.
+    #[error("rtde link closed: {reason}")]
+    LinkClosed {
+        /// Why.
+        reason: Arc<str>,
     },
     /// A configuration value is out of range.
     #[error("invalid configuration: {reason}")]
@@ -165,9 +178,9 @@ pub enum RobotIoError {
     /// Rows added to a trace must have strictly increasing timestamps.
     #[error("timestamp {found} s does not follow {previous} s")]
     TraceTimestampOrder {
-        /// The last timestamp in the trace [s].
+        /// The last timestamp in the trace \[s\].
         previous: f64,
-        /// The timestamp of the rejected row [s].
+        /// The timestamp of the rejected row \[s\].
         found: f64,
     },
     /// A `ReplayRobot` was read past the end of its trace.

@@ -4,6 +4,7 @@
 //! the input registers of our control program ([`RegisterMap`]). The program itself is sent
 //! separately, with [`crate::script::ScriptSender::send_control_program`].
 
+use std::borrow::Cow;
 use std::time::Duration;
 
 use crate::client::{ClientConfig, LinkState, OutputBuffer, RtdeClient};
@@ -37,7 +38,7 @@ pub struct RtdeRobotConfig {
     pub host: String,
     /// RTDE port (30004).
     pub port: u16,
-    /// Output frequency [Hz], ≤ 500.
+    /// Output frequency \[Hz\], ≤ 500.
     pub frequency_hz: f64,
     /// Where the register protocol lives.
     pub registers: RegisterMap,
@@ -175,21 +176,31 @@ impl Robot for RtdeRobot {
     /// Copies the newest received state into `out`.
     ///
     /// # Implementation
-    /// Never blocks and never allocates (the reader task fills a preallocated ring). When no
-    /// new sample arrived since the last call, `out` gets the previous one again. Errors with
-    /// [`RobotIoError::LinkDown`] while the link is down or before the first sample.
+    /// Never blocks and never allocates, on success and on error alike (the reader task
+    /// fills a preallocated ring; the link errors carry static or shared texts). When no new
+    /// sample arrived since the last call, `out` gets the previous one again. Errors with
+    /// [`RobotIoError::LinkDown`] while the link is being re-established or before the first
+    /// sample, and [`RobotIoError::LinkClosed`] once the client is closed for good.
     fn read_state(&mut self, out: &mut RobotState) -> Result<()> {
-        if self.client.link_state() != LinkState::Up {
-            return Err(RobotIoError::LinkDown {
-                reason: "rtde link is down".into(),
-            });
+        match self.client.link_state() {
+            LinkState::Up => {}
+            LinkState::Reconnecting => {
+                return Err(RobotIoError::LinkDown {
+                    reason: Cow::Borrowed("reconnecting"),
+                });
+            }
+            LinkState::Closed => {
+                return Err(self.client.fatal().unwrap_or(RobotIoError::LinkDown {
+                    reason: Cow::Borrowed("the client is closed"),
+                }));
+            }
         }
         if self.client.try_latest(&mut self.buf)?.is_some() {
             self.decode()?;
         }
         if !self.received {
             return Err(RobotIoError::LinkDown {
-                reason: "no state received yet".into(),
+                reason: Cow::Borrowed("no state received yet"),
             });
         }
         *out = self.last;
