@@ -38,7 +38,7 @@ use crate::trace::Trace;
 use crate::types::{JointCommand, Robot, RobotState};
 use crate::{Result, RobotIoError};
 
-/// Controller cycle [s].
+/// Controller cycle \[s\].
 pub const CYCLE_S: f64 = 0.002;
 /// Input registers per kind on e-Series (0..=47).
 pub const REGISTERS: usize = 48;
@@ -383,7 +383,12 @@ impl EmulatorBackend for SimBackend {
                     failed(cmd)
                 }
             }
-            DashboardCommand::PowerOff => format!("{} (not emulated)", failed(cmd)),
+            DashboardCommand::PowerOff => {
+                // As on a controller: the arm brakes to rest and a running program stops.
+                self.robot.power_off();
+                self.program = None;
+                "Powering off".into()
+            }
             DashboardCommand::BrakeRelease => {
                 if self.robot.brake_release() {
                     "Brake releasing".into()

@@ -12,13 +12,15 @@ use std::time::Duration;
 use hrc_adapt_tests::data_dir;
 use robot_io::client::{ClientConfig, LinkState, OutputBuffer, RtdeClient};
 use robot_io::codec::{FieldType, Value, known_field_type};
-use robot_io::dashboard::{DashboardClient, SafetyStatus};
+use robot_io::dashboard::{DashboardClient, RobotModeReply, SafetyStatus};
 use robot_io::emulator::{Emulator, EmulatorConfig, ReplayMode, SimBackend, TraceBackend};
 use robot_io::rtde_robot::{RtdeRobot, RtdeRobotConfig};
 use robot_io::script::{RegisterMap, ScriptSender};
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::trace::Trace;
-use robot_io::{JointCommand, Robot, RobotIoError, RobotState, runtime_state, safety_mode};
+use robot_io::{
+    JointCommand, Robot, RobotIoError, RobotState, robot_mode, runtime_state, safety_mode,
+};
 
 /// Every test body runs under this bound.
 const TEST_TIMEOUT: Duration = Duration::from_secs(60);
@@ -707,6 +709,115 @@ async fn dashboard_drives_the_sim_and_reports_safety() {
             d.raw("dance").await.unwrap(),
             "could not understand: 'dance'"
         );
+    })
+    .await
+    .expect("test timed out");
+}
+
+/// Waits (bounded) until the streamed state satisfies `done`; returns that state.
+async fn wait_for_state(
+    robot: &mut RtdeRobot,
+    what: &str,
+    done: impl Fn(&RobotState) -> bool,
+) -> RobotState {
+    let mut s = RobotState::default();
+    // 3000 samples at 125 Hz: 24 s of controller time, far beyond any transition here.
+    for _ in 0..3000 {
+        robot.wait_state(&mut s, SAMPLE_TIMEOUT).await.unwrap();
+        if done(&s) {
+            return s;
+        }
+    }
+    panic!("never saw {what}; last state {s:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn dashboard_power_off_power_on_and_brake_release_drive_the_sim() {
+    tokio::time::timeout(TEST_TIMEOUT, async {
+        let map = RegisterMap::default();
+        let (emu, mut robot) = sim_setup(map, 125.0).await;
+        let mut d = DashboardClient::connect(
+            "127.0.0.1",
+            emu.dashboard_addr().port(),
+            Duration::from_secs(5),
+        )
+        .await
+        .unwrap();
+        let qd = [0.2, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let mut s = RobotState::default();
+        for _ in 0..50 {
+            robot.send(&JointCommand::Speed { qd, acc: 2.0 }).unwrap();
+            robot.wait_state(&mut s, SAMPLE_TIMEOUT).await.unwrap();
+        }
+        assert!(s.actual_qd[0] > 0.1, "not moving: {:?}", s.actual_qd);
+        assert_eq!(
+            d.robot_mode().await.unwrap(),
+            RobotModeReply(robot_mode::RUNNING)
+        );
+
+        // power off: the arm brakes to rest, the program stops, the mode is POWER_OFF.
+        d.power_off().await.unwrap();
+        let s = wait_for_state(&mut robot, "the arm powered off and at rest", |s| {
+            s.robot_mode == robot_mode::POWER_OFF && s.actual_qd.iter().all(|v| *v == 0.0)
+        })
+        .await;
+        assert_ne!(s.runtime_state, runtime_state::PLAYING);
+        assert_eq!(emu.with_sim(|b| b.program_running()), Some(false));
+        assert_eq!(
+            d.robot_mode().await.unwrap(),
+            RobotModeReply(robot_mode::POWER_OFF)
+        );
+        // Commands are ignored while powered off.
+        let q_off = s.actual_q;
+        let mut s = RobotState::default();
+        for _ in 0..20 {
+            robot.send(&JointCommand::Speed { qd, acc: 2.0 }).unwrap();
+            robot.wait_state(&mut s, SAMPLE_TIMEOUT).await.unwrap();
+        }
+        assert_eq!(s.actual_q, q_off, "moved while powered off");
+
+        // brake release needs IDLE: refused while powered off, with the controller's wording.
+        let refused = d.brake_release().await;
+        assert!(
+            matches!(&refused, Err(RobotIoError::Dashboard { reply, .. }) if reply.starts_with("Failed to execute")),
+            "{refused:?}"
+        );
+        // power on: POWER_OFF -> IDLE; a second power on is refused.
+        d.power_on().await.unwrap();
+        wait_for_state(&mut robot, "robot_mode IDLE", |s| {
+            s.robot_mode == robot_mode::IDLE
+        })
+        .await;
+        assert!(matches!(
+            d.power_on().await,
+            Err(RobotIoError::Dashboard { .. })
+        ));
+        // brake release: IDLE -> RUNNING.
+        d.brake_release().await.unwrap();
+        wait_for_state(&mut robot, "robot_mode RUNNING", |s| {
+            s.robot_mode == robot_mode::RUNNING
+        })
+        .await;
+        assert_eq!(
+            d.robot_mode().await.unwrap(),
+            RobotModeReply(robot_mode::RUNNING)
+        );
+
+        // Our program runs again once re-sent, and the arm moves.
+        ScriptSender::new("127.0.0.1", emu.secondary_addr().port())
+            .send_control_program(&map)
+            .await
+            .unwrap();
+        wait_for_state(&mut robot, "the program playing again", |s| {
+            s.runtime_state == runtime_state::PLAYING
+        })
+        .await;
+        let mut s = RobotState::default();
+        for _ in 0..50 {
+            robot.send(&JointCommand::Speed { qd, acc: 2.0 }).unwrap();
+            robot.wait_state(&mut s, SAMPLE_TIMEOUT).await.unwrap();
+        }
+        assert!(s.actual_qd[0] > 0.1, "not moving after power-up: {:?}", s.actual_qd);
     })
     .await
     .expect("test timed out");
