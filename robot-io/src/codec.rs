@@ -26,13 +26,13 @@ use crate::{Result, RobotIoError};
 
 /// RTDE protocol version this crate speaks.
 pub const PROTOCOL_VERSION: u16 = 2;
-/// Size of the package header (`u16` size + `u8` type) [B].
+/// Size of the package header (`u16` size + `u8` type) \[B\].
 pub const HEADER_LEN: usize = 3;
-/// Largest package the `u16` size allows [B].
+/// Largest package the `u16` size allows \[B\].
 pub const MAX_PACKAGE_LEN: usize = u16::MAX as usize;
-/// Longest comma-separated name list the controller accepts [B].
+/// Longest comma-separated name list the controller accepts \[B\].
 pub const MAX_NAME_LIST_LEN: usize = 2048;
-/// Highest output frequency of an e-Series controller [Hz].
+/// Highest output frequency of an e-Series controller \[Hz\].
 pub const MAX_FREQUENCY_HZ: f64 = 500.0;
 
 /// The package type bytes.
@@ -95,7 +95,7 @@ impl FieldType {
         FieldType::Vector6Uint32,
     ];
 
-    /// Encoded size [B].
+    /// Encoded size \[B\].
     pub const fn size(self) -> usize {
         match self {
             FieldType::Double | FieldType::Uint64 => 8,
@@ -438,7 +438,7 @@ pub enum ClientPackage<'a> {
     GetControllerVersion,
     /// `O`: set up an output recipe.
     SetupOutputs {
-        /// Output frequency [Hz].
+        /// Output frequency \[Hz\].
         frequency_hz: f64,
         /// Comma-separated field names.
         names: &'a str,
@@ -852,7 +852,7 @@ pub fn encode_data_package(recipe_id: u8, values: &[Value], out: &mut Vec<u8>) -
 /// Where one field sits in a data package's payload. `Copy`; precomputed by [`Recipe`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FieldSlot {
-    /// Byte offset in the payload (after the recipe id) [B].
+    /// Byte offset in the payload (after the recipe id) \[B\].
     pub offset: usize,
     /// The field's type.
     pub ty: FieldType,
@@ -989,7 +989,7 @@ impl Recipe {
         self.slots.is_empty()
     }
 
-    /// Payload length of a data package, recipe id excluded [B].
+    /// Payload length of a data package, recipe id excluded \[B\].
     pub fn payload_len(&self) -> usize {
         self.payload_len
     }

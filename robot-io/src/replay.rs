@@ -30,9 +30,9 @@ pub enum Pacing {
     /// One row per `read_state`.
     #[default]
     PerRead,
-    /// A mock clock advancing `period_s` [s] per `read_state`, holding the last recorded row.
+    /// A mock clock advancing `period_s` \[s\] per `read_state`, holding the last recorded row.
     Clocked {
-        /// Clock advance per read [s], finite and > 0 (0.002 for 500 Hz).
+        /// Clock advance per read \[s\], finite and > 0 (0.002 for 500 Hz).
         period_s: f64,
     },
 }
@@ -106,7 +106,7 @@ impl ReplayRobot {
         self.reads
     }
 
-    /// The clocked pacing's time for the next read [s] (the first row's timestamp plus
+    /// The clocked pacing's time for the next read \[s\] (the first row's timestamp plus
     /// `reads × period_s`); with `PerRead`, the next row's timestamp. `None` when the trace is
     /// empty or, per read, finished.
     pub fn clock_s(&self) -> Option<f64> {

@@ -50,9 +50,9 @@ pub const INPUT_VALUES: usize = INT_REGISTERS + DOUBLE_REGISTERS;
 /// Registers (with the defaults `int_base = double_base = 24`):
 /// - `input_int_register_24`: command id ([`command_id`]); the watchdog watches it;
 /// - `input_int_register_25`: sequence number (incremented per command);
-/// - `input_double_register_24..29`: joint targets, q [rad] or qd [rad/s];
-/// - `input_double_register_30`: servoj time [s];
-/// - `input_double_register_31`: servoj lookahead [s], in [0.03, 0.2];
+/// - `input_double_register_24..29`: joint targets, q \[rad\] or qd [rad/s];
+/// - `input_double_register_30`: servoj time \[s\];
+/// - `input_double_register_31`: servoj lookahead \[s\], in [0.03, 0.2];
 /// - `input_double_register_32`: servoj gain [-], in [100, 2000];
 /// - `input_double_register_33`: speedj acceleration or stopj deceleration [rad/s²].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -62,9 +62,9 @@ pub struct RegisterMap {
     pub int_base: u8,
     /// First double input register.
     pub double_base: u8,
-    /// Minimum command-register write frequency before the watchdog stops the program [Hz].
+    /// Minimum command-register write frequency before the watchdog stops the program \[Hz\].
     pub watchdog_hz: f64,
-    /// servoj time sent with each servo command [s] (one 500 Hz cycle by default).
+    /// servoj time sent with each servo command \[s\] (one 500 Hz cycle by default).
     pub servo_time_s: f64,
 }
 

@@ -112,9 +112,9 @@ pub enum TraceParseErrorKind {
     /// A timestamp smaller than the one before it.
     #[error("timestamp {found} s goes back from {previous} s")]
     TimestampDecreasing {
-        /// The previous row's timestamp [s].
+        /// The previous row's timestamp \[s\].
         previous: f64,
-        /// This row's timestamp [s].
+        /// This row's timestamp \[s\].
         found: f64,
     },
 }
@@ -183,9 +183,9 @@ impl WriteOptions {
 pub struct Gap {
     /// The row (0-based, after de-duplication) the gap follows.
     pub after_row: usize,
-    /// The timestamp of that row [s].
+    /// The timestamp of that row \[s\].
     pub after_timestamp: f64,
-    /// The step to the next row [s].
+    /// The step to the next row \[s\].
     pub duration_s: f64,
     /// Nominal periods missing: `round(duration_s / nominal_period_s) - 1`, at least 1.
     pub missing_periods: u64,
@@ -198,7 +198,7 @@ pub struct TraceReport {
     pub rows: usize,
     /// Rows dropped because their timestamp repeated the previous row's.
     pub duplicates_removed: usize,
-    /// The lower median of the positive steps between timestamps [s]; `None` with fewer than two rows.
+    /// The lower median of the positive steps between timestamps \[s\]; `None` with fewer than two rows.
     pub nominal_period_s: Option<f64>,
     /// Steps longer than 1.5 nominal periods, in order.
     pub gaps: Vec<Gap>,
@@ -342,7 +342,7 @@ pub fn state_to_row(state: &RobotState, row: &mut [f64; 44]) {
 /// A recorded RTDE trace held in memory: timestamps and named numeric fields, one row per
 /// controller sample, plus any verbatim leading columns.
 ///
-/// Field 0 is always `timestamp` [s] (controller time); timestamps strictly increase.
+/// Field 0 is always `timestamp` \[s\] (controller time); timestamps strictly increase.
 #[derive(Debug, Clone)]
 pub struct Trace {
     source: PathBuf,
@@ -478,12 +478,12 @@ impl Trace {
         self.index.get(name).copied()
     }
 
-    /// Controller timestamp of `row` [s].
+    /// Controller timestamp of `row` \[s\].
     pub fn timestamp(&self, row: usize) -> Option<f64> {
         self.value_at(row, 0)
     }
 
-    /// The value of field `name` at `row` (units as recorded: [rad], [rad/s], [m], [s], …).
+    /// The value of field `name` at `row` (units as recorded: \[rad\], [rad/s], \[m\], \[s\], …).
     pub fn value(&self, row: usize, name: &str) -> Option<f64> {
         self.value_at(row, self.column_index(name)?)
     }
@@ -510,7 +510,7 @@ impl Trace {
         (i < self.values.len()).then_some(i)
     }
 
-    /// The row holding the sample in force at controller time `t_s` [s]: the last row whose
+    /// The row holding the sample in force at controller time `t_s` \[s\]: the last row whose
     /// timestamp is ≤ `t_s` (sample and hold). `None` before the first row.
     pub fn row_at_time(&self, t_s: f64) -> Option<usize> {
         let (mut lo, mut hi) = (0, self.len());
