@@ -8,7 +8,7 @@
 //! ```text
 //! q̇ = argmin ½‖q̇ − r‖² + ρ Σᵢ sᵢ
 //!     subject to  lo ≤ q̇ ≤ hi                                   (hard)
-//!                 aᵢᵀ q̇ ≤ bᵢ + sᵢ,  sᵢ ≥ 0,  i = 1..m            (soft, L1-penalised slack)
+//!                 aᵢᵀ q̇ ≤ bᵢ + sᵢ,  0 ≤ sᵢ ≤ uᵢ,  i = 1..m       (soft, L1-penalised slack)
 //! lo_j = max(−v_max,j, q̇_prev,j − a_max,j dt),  hi_j = min(v_max,j, q̇_prev,j + a_max,j dt)
 //! ```
 //! The box is the intersection of the joint velocity limits and the acceleration limits
@@ -34,13 +34,17 @@
 //! one step cannot bring an approach speed under its limit. The L1 penalty is exact: when the hard
 //! problem is feasible and ρ exceeds its largest multiplier, the slack is zero; when it is not, the
 //! solution minimises the violation, i.e. brakes toward the limit as hard as the box allows.
+//! The slack is capped, `uᵢ = max(0, aᵢᵀ q̇_brake − bᵢ)` with `q̇_brake` the braking fallback (below):
+//! a row may stay violated, but never by more than braking would leave it. `q̇_brake` lies in the
+//! box and meets every capped row, so the penalised problem is always feasible.
 //!
 //! # Solver (real-time path)
 //!
 //! [`SpeedScaler`] solves the problem itself, allocation-free, with fixed-size arrays:
 //! 1. If the box projection `clip(r, lo, hi)` meets every row, it is optimal (most cycles).
 //! 2. Otherwise, dual coordinate ascent: the dual of the penalised problem is
-//!    `max_{0 ≤ λ ≤ ρ} min_{lo ≤ x ≤ hi} ½‖x − r‖² + λᵀ(Ax − b)`, whose inner minimiser is
+//!    `max_{λ ≥ 0} min_{lo ≤ x ≤ hi} ½‖x − r‖² + λᵀ(Ax − b) − Σᵢ max(0, λᵢ − ρ) uᵢ`
+//!    (a row's multiplier exceeds ρ only once its slack is exhausted), whose inner minimiser is
 //!    `x(λ) = clip(r − Aᵀλ, lo, hi)`. Each coordinate step maximises exactly over one `λᵢ`:
 //!    that is the closed-form projection onto the box and one half-space,
 //!    [`project_box_halfspace`] (a monotone piecewise-linear root, found by walking the ≤ 12
@@ -158,7 +162,7 @@ impl Default for QpParams {
     fn default() -> Self {
         Self {
             slack_penalty_rad_s: 1e3,
-            tolerance_rad_s: 1e-9,
+            tolerance_rad_s: 1e-7,
             max_sweeps: 500,
         }
     }
@@ -222,6 +226,9 @@ pub struct Problem {
     pub a: [[f64; N_JOINTS]; MAX_ROWS],
     /// Right-hand sides, rad/s (≥ 0).
     pub b: [f64; MAX_ROWS],
+    /// Largest slack allowed per row, rad/s: `uᵢ = max(0, aᵢᵀ q̇_brake − bᵢ)`, so a row may be
+    /// violated only down to what the braking fallback achieves.
+    pub u: [f64; MAX_ROWS],
     /// Number of rows in use.
     pub m: usize,
     /// The braking fallback for this input, rad/s.
@@ -406,9 +413,15 @@ impl Problem {
         if max_over_box <= bn {
             return;
         }
-        if let (Some(row), Some(rhs)) = (self.a.get_mut(self.m), self.b.get_mut(self.m)) {
+        let slack_max = (dot6(&an, &self.brake) - bn).max(0.0);
+        if let (Some(row), Some(rhs), Some(u)) = (
+            self.a.get_mut(self.m),
+            self.b.get_mut(self.m),
+            self.u.get_mut(self.m),
+        ) {
             *row = an;
             *rhs = bn;
+            *u = slack_max;
             self.m += 1;
         }
     }
@@ -615,7 +628,12 @@ impl SpeedScaler {
                 for (cj, aj) in c.iter_mut().zip(a) {
                     *cj += *li * aj;
                 }
-                let t = project_box_halfspace(&c, &p.lo, &p.hi, a, b, rho, &mut tmp);
+                let u = p.u.get(i).copied().unwrap_or(0.0);
+                let mut t = project_box_halfspace(&c, &p.lo, &p.hi, a, b, rho, &mut tmp);
+                if t >= rho && dot6(a, &tmp) > b + u {
+                    // Slack exhausted: the row is hard at b + u (never worse than braking).
+                    t = project_box_halfspace(&c, &p.lo, &p.hi, a, b + u, f64::INFINITY, &mut tmp);
+                }
                 *li = t;
                 for (cj, aj) in c.iter_mut().zip(a) {
                     *cj -= t * aj;
@@ -624,16 +642,21 @@ impl SpeedScaler {
             // KKT check on x(λ).
             x = c;
             p.clamp_to_box(&mut x);
-            converged = p.rows().zip(&self.lambda).all(|((a, b), l)| {
-                let v = dot6(a, &x) - b;
-                if *l <= 0.0 {
-                    v <= tol
-                } else if *l >= rho {
-                    v >= -tol
-                } else {
-                    v.abs() <= tol
-                }
-            });
+            converged = p
+                .rows()
+                .zip(self.lambda.iter().zip(&p.u))
+                .all(|((a, b), (l, u))| {
+                    let v = dot6(a, &x) - b;
+                    if *l <= 0.0 {
+                        v <= tol
+                    } else if *l < rho {
+                        v.abs() <= tol
+                    } else if *l == rho {
+                        v >= -tol && v <= u + tol
+                    } else {
+                        (v - u).abs() <= tol
+                    }
+                });
             if converged {
                 break;
             }
@@ -681,11 +704,12 @@ impl std::fmt::Debug for ClarabelSpeedScaler {
 
 const M: usize = MAX_ROWS;
 const N_VARS: usize = N_JOINTS + M;
-const N_CONS: usize = 2 * M + 2 * N_JOINTS;
+const N_CONS: usize = 3 * M + 2 * N_JOINTS;
 
 impl ClarabelSpeedScaler {
     /// Builds the clarabel solver for the fixed sparsity: variables `[q̇ (6); s (10)]`, rows
-    /// `aᵢᵀq̇ − sᵢ ≤ bᵢ`, `−sᵢ ≤ 0`, `q̇ ≤ hi`, `−q̇ ≤ −lo`, all in one non-negative cone.
+    /// `aᵢᵀq̇ − sᵢ ≤ bᵢ`, `−sᵢ ≤ 0`, `sᵢ ≤ uᵢ`, `q̇ ≤ hi`, `−q̇ ≤ −lo`, all in one non-negative
+    /// cone.
     pub fn new(cfg: QpConfig) -> Result<Self> {
         use clarabel::algebra::CscMatrix;
         use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, NonnegativeConeT};
@@ -711,9 +735,9 @@ impl ClarabelSpeedScaler {
                 rowval.push(i);
                 nzval.push(0.0);
             }
-            rowval.push(2 * M + j);
+            rowval.push(3 * M + j);
             nzval.push(1.0);
-            rowval.push(2 * M + N_JOINTS + j);
+            rowval.push(3 * M + N_JOINTS + j);
             nzval.push(-1.0);
         }
         for i in 0..M {
@@ -722,6 +746,8 @@ impl ClarabelSpeedScaler {
             nzval.push(-1.0);
             rowval.push(M + i);
             nzval.push(-1.0);
+            rowval.push(2 * M + i);
+            nzval.push(1.0);
         }
         colptr.push(rowval.len());
         let a_vals = nzval.clone();
@@ -731,7 +757,7 @@ impl ClarabelSpeedScaler {
             *s = cfg.params.slack_penalty_rad_s;
         }
         let mut b = vec![1.0; N_CONS];
-        for v in b.iter_mut().skip(M).take(M) {
+        for v in b.iter_mut().skip(M).take(2 * M) {
             *v = 0.0;
         }
         let settings = DefaultSettingsBuilder::default()
@@ -740,6 +766,9 @@ impl ClarabelSpeedScaler {
             .equilibrate_enable(false)
             .input_sparse_dropzeros(false)
             .max_iter(100)
+            .tol_gap_abs(1e-10)
+            .tol_gap_rel(1e-10)
+            .tol_feas(1e-10)
             .build()
             .map_err(|e| setup(e.to_string()))?;
         let cones = [NonnegativeConeT(N_CONS)];
@@ -779,12 +808,15 @@ impl ClarabelSpeedScaler {
         }
         // b and the row values; unused rows are 0 ≤ 1.
         for i in 0..M {
-            let (row, rhs) = match (p.a.get(i), p.b.get(i)) {
-                (Some(row), Some(rhs)) if i < p.m => (*row, *rhs),
-                _ => ([0.0; N_JOINTS], 1.0),
+            let (row, rhs, u) = match (p.a.get(i), p.b.get(i), p.u.get(i)) {
+                (Some(row), Some(rhs), Some(u)) if i < p.m => (*row, *rhs, *u),
+                _ => ([0.0; N_JOINTS], 1.0, 0.0),
             };
             if let Some(v) = self.b.get_mut(i) {
                 *v = rhs;
+            }
+            if let Some(v) = self.b.get_mut(2 * M + i) {
+                *v = u;
             }
             for (j, aij) in row.iter().enumerate() {
                 if let Some(v) = self.a_vals.get_mut(j * (M + 2) + i) {
@@ -793,10 +825,10 @@ impl ClarabelSpeedScaler {
             }
         }
         for (j, (h, l)) in p.hi.iter().zip(&p.lo).enumerate() {
-            if let Some(v) = self.b.get_mut(2 * M + j) {
+            if let Some(v) = self.b.get_mut(3 * M + j) {
                 *v = *h;
             }
-            if let Some(v) = self.b.get_mut(2 * M + N_JOINTS + j) {
+            if let Some(v) = self.b.get_mut(3 * M + N_JOINTS + j) {
                 *v = -l;
             }
         }
