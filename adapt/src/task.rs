@@ -355,7 +355,7 @@ impl TaskConfig {
 
     /// Validate a raw config, solving Cartesian poses with `solve_ik(pose, seed)`, which returns
     /// the IK branch nearest `seed` for the flange pose `[x, y, z, rx, ry, rz]` ([m], [rad]) or
-    /// `None` when the pose is unreachable. [`TryFrom<RawTaskConfig>`] uses [`crate::ik`].
+    /// `None` when the pose is unreachable. `TryFrom<&RawTaskConfig>` uses [`crate::ik::nearest`].
     pub fn from_raw_with(
         raw: &RawTaskConfig,
         mut solve_ik: impl FnMut(&[f64; 6], &Joints) -> Option<Joints>,
@@ -380,6 +380,27 @@ impl TaskConfig {
         };
         cfg.validate()?;
         Ok(cfg)
+    }
+}
+
+impl TryFrom<&RawTaskConfig> for TaskConfig {
+    type Error = AdaptError;
+
+    /// Validate, solving Cartesian poses with [`crate::ik::nearest`] (flange poses; the branch
+    /// nearest the seed described in [`RawPoses`]).
+    fn try_from(raw: &RawTaskConfig) -> Result<TaskConfig> {
+        TaskConfig::from_raw_with(raw, |pose, seed| {
+            crate::ik::nearest(seed, &robot_io::kinematics::pose_from_vector(pose)).ok()
+        })
+    }
+}
+
+impl TryFrom<RawTaskConfig> for TaskConfig {
+    type Error = AdaptError;
+
+    /// As `TryFrom<&RawTaskConfig>`.
+    fn try_from(raw: RawTaskConfig) -> Result<TaskConfig> {
+        TaskConfig::try_from(&raw)
     }
 }
 

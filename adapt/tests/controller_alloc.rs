@@ -1,0 +1,106 @@
+//! `Controller::step` allocates nothing: a counting global allocator (per thread) over a whole
+//! closed-loop handover on `SimRobot`, with a SIMULATED hand that intrudes during the approach
+//! (speed scaling active) and then reaches the presented TCP.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use adapt::controller::{Controller, ControllerConfig, HumanPoints, MotionAdaptation};
+use adapt::task::Phase;
+use robot_io::sim::{SimConfig, SimRobot};
+use robot_io::{JointCommand, Robot, RobotState};
+
+struct Counting;
+
+thread_local! {
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+}
+
+// SAFETY: forwards to the system allocator; the counter is a thread-local `Cell` with a const
+// initialiser, so touching it never allocates or recurses.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.with(|c| c.set(c.get() + 1));
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.with(|c| c.set(c.get() + 1));
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocations() -> u64 {
+    ALLOCATIONS.with(Cell::get)
+}
+
+#[test]
+fn step_allocates_nothing_over_a_whole_handover() {
+    let cfg = ControllerConfig::example();
+    let mut robot = SimRobot::new(SimConfig {
+        initial_q_rad: cfg.task.home_q_rad,
+        ..SimConfig::ur5e()
+    })
+    .unwrap();
+    let mut ctl = Controller::new(cfg).unwrap();
+    let mut state = RobotState::default();
+    let mut cmd = JointCommand::Stop { decel: 1.0 };
+    let adaptation = MotionAdaptation {
+        min_approach_duration: std::time::Duration::from_secs(2),
+        ..MotionAdaptation::default()
+    };
+    let (home, intrusion) = ([-1.25, -0.13, 0.2], [-0.97, -0.13, 0.25]);
+    let mut hand: [f64; 3] = home;
+    let mut approach_cycles = 0u32;
+    ctl.start_handover();
+
+    let (mut steps, mut step_allocs, mut phases) = (0u64, 0u64, vec![ctl.phase()]);
+    phases.reserve(16);
+    while ctl.phase() != Phase::Done {
+        assert!(steps < 20_000, "no Done: {phases:?}");
+        robot.read_state(&mut state).unwrap();
+        let tcp = state.actual_tcp_pose;
+        let goal = match ctl.phase() {
+            Phase::Approach => {
+                approach_cycles += 1;
+                let t = f64::from(approach_cycles) * 0.002;
+                if (0.3..1.3).contains(&t) {
+                    intrusion
+                } else {
+                    home
+                }
+            }
+            Phase::Present => [tcp[0] - 0.03, tcp[1], tcp[2]],
+            _ => home,
+        };
+        for (h, g) in hand.iter_mut().zip(goal) {
+            *h += (g - *h).clamp(-0.002, 0.002);
+        }
+        let humans = HumanPoints {
+            head_m: Some([-1.45, -0.13, 0.75]),
+            left_hand_m: None,
+            right_hand_m: Some(hand),
+        };
+        let before = allocations();
+        ctl.step(state.timestamp_s, &state, &adaptation, &humans, &mut cmd);
+        step_allocs += allocations() - before;
+        steps += 1;
+        if phases.last() != Some(&ctl.phase()) {
+            phases.push(ctl.phase());
+        }
+        robot.send(&cmd).unwrap();
+        robot.step();
+    }
+    assert!(ctl.stats().scaled_steps > 0, "speed scaling was exercised");
+    assert!(phases.contains(&Phase::Release));
+    assert_eq!(step_allocs, 0, "allocations in {steps} steps");
+    eprintln!("{steps} steps, 0 allocations; {:?}", ctl.stats());
+}
