@@ -1,6 +1,6 @@
 //! # adapt: turning an adaptation into safe, smooth UR5e joint commands
 //!
-//! **In progress (issue 4).** This crate holds:
+//! This crate holds:
 //! - UR5e inverse kinematics (8 branches, nearest to the current joint vector) on top of the
 //!   forward kinematics in `robot_io::kinematics`;
 //! - jerk-limited online trajectory generation with `rsruckig`;
@@ -9,6 +9,38 @@
 //! - `Controller::step`, the 500 Hz cycle, which allocates nothing.
 //!
 //! It depends on `robot-io` types only and never sees `assess` types.
+//!
+//! Main types: [`controller::Controller`] (with [`controller::MotionAdaptation`] and
+//! [`controller::HumanPoints`] as inputs), [`task::HandoverTask`], [`otg::Otg`] with
+//! [`otg::MotionLimits`], [`qp::SpeedScaler`] returning a [`qp::QpStatus`] every cycle,
+//! [`ssm::SsmConfig`], and [`ik::nearest`].
+//!
+//! # Example
+//! Inverse kinematics back to a joint vector, then a jerk-limited move to it at half speed:
+//! ```
+//! use adapt::ik;
+//! use adapt::otg::{LimitScale, MotionLimits, Otg, OtgState, PlanStatus};
+//! use robot_io::kinematics::flange_pose;
+//!
+//! let start = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0];
+//! let goal = [0.4, -1.2, 1.3, -1.6, -1.57, 0.3];
+//! let q = ik::nearest(&start, &flange_pose(&goal))?;
+//! assert!(q.iter().zip(&goal).all(|(a, b)| (a - b).abs() < 1e-9));
+//!
+//! let half = LimitScale::new(0.5)?;
+//! let limits = MotionLimits::ur5e_nominal().scaled(half, half);
+//! let mut otg = Otg::new(0.002, limits)?;
+//! otg.set_current_state(&start, &[0.0; 6], &[0.0; 6]);
+//! otg.set_target(&q, None)?;
+//! let mut state = OtgState::default();
+//! let mut cycles = 0;
+//! while otg.step(&mut state)? == PlanStatus::Working {
+//!     cycles += 1;
+//! }
+//! assert!(state.position.iter().zip(&q).all(|(a, b)| (a - b).abs() < 1e-6));
+//! assert!(cycles > 100); // well over 0.2 s at half speed
+//! # Ok::<(), adapt::AdaptError>(())
+//! ```
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::indexing_slicing))]
 
 mod error;

@@ -1,9 +1,40 @@
 //! # robot-io: the wire to the UR5e
 //!
-//! **In progress (issue 3).** This crate will hold the RTDE codec and tokio client, the UR
-//! controller emulator, the [`Robot`] trait with `RtdeRobot`, `SimRobot` and `ReplayRobot`,
-//! dashboard and script senders, and trace readers and writers. It depends on no other crate of
-//! the project.
+//! Everything between hrc-adapt and a Universal Robots controller, and the test bench that
+//! stands in for one. It depends on no other crate of the project.
+//!
+//! - [`Robot`]: one control cycle's `read_state` and `send`, with three implementations:
+//!   [`RtdeRobot`] (a real UR5e or URSim over RTDE), [`sim::SimRobot`] (an in-process UR5e
+//!   model on a mock clock, with fault injection) and [`replay::ReplayRobot`] (a recorded trace).
+//! - [`codec`]: every RTDE package and field type, with recipes built once and decoding into
+//!   caller-owned buffers; [`RtdeClient`]: the tokio client (protocol v2, recipes, a reader task
+//!   that always drains the socket, link-loss detection and reconnect with backoff).
+//! - [`Emulator`]: a UR controller on loopback (RTDE 30004, dashboard 29999, script
+//!   30002/30003), backed by [`SimBackend`] or [`TraceBackend`].
+//! - [`script`]: our URScript control program and its register protocol; [`DashboardClient`].
+//! - [`trace`]: UR `record.py` and ur_rtde CSV readers and writers, de-duplication, gap reports.
+//! - [`kinematics`]: UR5e forward kinematics and Jacobians, shared with `adapt` and `safety`.
+//!
+//! # Example
+//! A servoJ command on the simulated UR5e, one 2 ms cycle at a time:
+//! ```
+//! use robot_io::sim::{SimConfig, SimRobot};
+//! use robot_io::{JointCommand, Robot, RobotState};
+//!
+//! let mut robot = SimRobot::new(SimConfig::ur5e())?;
+//! let mut state = RobotState::default();
+//! robot.read_state(&mut state)?;
+//! let mut target = state.actual_q;
+//! target[0] += 0.05; // 0.05 rad on the base joint
+//! for _ in 0..500 {
+//!     robot.send(&JointCommand::Servo { q: target, lookahead_s: 0.1, gain: 300.0 })?;
+//!     robot.step();
+//! }
+//! robot.read_state(&mut state)?;
+//! assert!((state.actual_q[0] - target[0]).abs() < 1e-3);
+//! assert!(state.timestamp_s >= 1.0); // 500 cycles of 2 ms on the mock clock
+//! # Ok::<(), robot_io::RobotIoError>(())
+//! ```
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::indexing_slicing))]
 
 mod error;
