@@ -2,45 +2,14 @@
 //! closed-loop handover on `SimRobot`, with a SIMULATED hand that intrudes during the approach
 //! (speed scaling active) and then reaches the presented TCP.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
 use adapt::controller::{Controller, ControllerConfig, HumanPoints, MotionAdaptation};
 use adapt::task::Phase;
+use hrc_adapt_tests::alloc_count::{CountingAllocator, allocations_in};
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Robot, RobotState};
 
-struct Counting;
-
-thread_local! {
-    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-}
-
-// SAFETY: forwards to the system allocator; the counter is a thread-local `Cell` with a const
-// initialiser, so touching it never allocates or recurses.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.with(|c| c.set(c.get() + 1));
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.with(|c| c.set(c.get() + 1));
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: Counting = Counting;
-
-fn allocations() -> u64 {
-    ALLOCATIONS.with(Cell::get)
-}
+static GLOBAL: CountingAllocator = CountingAllocator;
 
 #[test]
 fn step_allocates_nothing_over_a_whole_handover() {
@@ -89,9 +58,9 @@ fn step_allocates_nothing_over_a_whole_handover() {
             left_hand_m: None,
             right_hand_m: Some(hand),
         };
-        let before = allocations();
-        ctl.step(state.timestamp_s, &state, &adaptation, &humans, &mut cmd);
-        step_allocs += allocations() - before;
+        let ((), n) =
+            allocations_in(|| ctl.step(state.timestamp_s, &state, &adaptation, &humans, &mut cmd));
+        step_allocs += n;
         steps += 1;
         if phases.last() != Some(&ctl.phase()) {
             phases.push(ctl.phase());

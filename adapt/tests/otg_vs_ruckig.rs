@@ -111,42 +111,10 @@ fn rsruckig_durations_match_cpp_ruckig_within_1e_9_relative() {
 
 // --- behaviour of the `Otg` wrapper ---
 
-mod alloc_counter {
-    use std::alloc::{GlobalAlloc, Layout, System};
-    use std::cell::Cell;
-
-    thread_local! {
-        static COUNT: Cell<Option<u64>> = const { Cell::new(None) };
-    }
-
-    /// Counts allocations on the current thread while counting is on.
-    pub(crate) struct Counting;
-
-    unsafe impl GlobalAlloc for Counting {
-        unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-            let _ = COUNT.try_with(|c| c.set(c.get().map(|n| n + 1)));
-            unsafe { System.alloc(layout) }
-        }
-        unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-            unsafe { System.dealloc(ptr, layout) }
-        }
-        unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-            let _ = COUNT.try_with(|c| c.set(c.get().map(|n| n + 1)));
-            unsafe { System.realloc(ptr, layout, new_size) }
-        }
-    }
-
-    /// Allocations made on this thread by `f`.
-    pub(crate) fn count<R>(f: impl FnOnce() -> R) -> (R, u64) {
-        COUNT.with(|c| c.set(Some(0)));
-        let r = f();
-        let n = COUNT.with(|c| c.replace(None)).unwrap_or(0);
-        (r, n)
-    }
-}
+use hrc_adapt_tests::alloc_count::{CountingAllocator, allocations_in};
 
 #[global_allocator]
-static ALLOC: alloc_counter::Counting = alloc_counter::Counting;
+static GLOBAL: CountingAllocator = CountingAllocator;
 
 use adapt::AdaptError;
 use adapt::otg::{LimitScale, Otg, OtgState, PlanStatus, UR5E_CYCLE_S};
@@ -225,7 +193,7 @@ fn otg_retargets_online_continuously_and_without_allocating() {
     let slow = MotionLimits::ur5e_nominal()
         .scaled(LimitScale::new(0.2).unwrap(), LimitScale::new(0.3).unwrap());
     let mut prev = OtgState::default();
-    let ((), allocations) = alloc_counter::count(|| {
+    let ((), allocations) = allocations_in(|| {
         for cycle in 0..1500 {
             if cycle == 200 {
                 otg.set_target(&[-0.5, 0.3, 0.0, 0.0, 0.4, -0.2], Some(1.5))

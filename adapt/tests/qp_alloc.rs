@@ -1,52 +1,14 @@
 //! The 500 Hz speed scaler allocates nothing per cycle (counting global allocator), and what
 //! clarabel does, for the record.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-
 use adapt::qp::{
     ClarabelSpeedScaler, ControlPointInput, HumanPoint, QpConfig, QpInput, QpStatus, SpeedScaler,
 };
 use adapt::ssm::HumanPointKind;
-
-struct Counting;
-
-static COUNTING: AtomicBool = AtomicBool::new(false);
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
-
-// SAFETY: forwards to the system allocator; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if COUNTING.load(Ordering::Relaxed) {
-            ALLOCS.fetch_add(1, Ordering::Relaxed);
-        }
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if COUNTING.load(Ordering::Relaxed) {
-            ALLOCS.fetch_add(1, Ordering::Relaxed);
-        }
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use hrc_adapt_tests::alloc_count::{CountingAllocator, allocations_in};
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
-
-/// Counts allocations in `f` (single test in this binary, so no other thread interferes).
-fn count<R>(f: impl FnOnce() -> R) -> (R, usize) {
-    ALLOCS.store(0, Ordering::SeqCst);
-    COUNTING.store(true, Ordering::SeqCst);
-    let r = f();
-    COUNTING.store(false, Ordering::SeqCst);
-    (r, ALLOCS.load(Ordering::SeqCst))
-}
+static GLOBAL: CountingAllocator = CountingAllocator;
 
 fn inputs() -> Vec<QpInput> {
     let tcp = ControlPointInput {
@@ -123,7 +85,7 @@ fn speed_scaler_allocates_nothing_per_cycle_and_clarabel_does() {
     for c in &cases {
         scaler.solve(c, &mut out);
     }
-    let (statuses, n) = count(|| {
+    let (statuses, n) = allocations_in(|| {
         let mut seen = [0usize; 5];
         for _ in 0..200 {
             for c in &cases {
@@ -150,7 +112,7 @@ fn speed_scaler_allocates_nothing_per_cycle_and_clarabel_does() {
     }
     let mut per_case = Vec::with_capacity(cases.len());
     for c in &cases {
-        let (_, n) = count(|| cla.solve(c, &mut out));
+        let (_, n) = allocations_in(|| cla.solve(c, &mut out));
         per_case.push(n);
     }
     eprintln!("clarabel allocations per solve, by case: {per_case:?}");

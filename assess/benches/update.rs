@@ -17,32 +17,8 @@ use assess::{
 use criterion::Criterion;
 
 fn workspace() -> Workspace {
-    Workspace::from_toml_str(
-        r#"
-        [[area]]
-        name = "assembly"
-        role = "assembly"
-        min_m = [0.3, -0.3, 0.7]
-        max_m = [0.8, 0.3, 0.9]
-        [[area]]
-        name = "storage"
-        role = "tool_identification"
-        min_m = [-0.2, 0.5, 0.7]
-        max_m = [0.3, 0.9, 0.9]
-        [[area]]
-        name = "instruction"
-        role = "instruction"
-        min_m = [-0.2, -0.9, 1.0]
-        max_m = [0.3, -0.5, 1.5]
-        [[area]]
-        name = "handover"
-        role = "collaboration"
-        centre_m = [0.9, 0.6, 1.0]
-        size_m = [0.3, 0.3, 0.3]
-        yaw_deg = 30
-        "#,
-    )
-    .expect("valid workspace")
+    let path = hrc_adapt_tests::config_dir().join("example-workspace.toml");
+    Workspace::from_toml_file(path).expect("valid workspace")
 }
 
 /// Simulated frame number `k` (all cues present).

@@ -1,51 +1,16 @@
 //! `Assessor::update` allocates nothing after construction (counting global allocator).
 //!
-//! The counter is per thread, so allocations of the test harness's other threads don't count.
-
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
+//! The counter (`hrc_adapt_tests::alloc_count`) is per thread, so allocations of the test
+//! harness's other threads don't count.
 
 use assess::{
     AssessConfig, Assessor, BaselineMode, BodyCue, CueFrame, HandCue, HeadCue, RobotContext, Vec3,
     Workspace,
 };
-
-struct Counting;
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        count();
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-fn count() {
-    // `try_with`: the thread-locals may be gone while a thread shuts down.
-    let _ = COUNTING.try_with(|on| {
-        if on.get() {
-            let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
-        }
-    });
-}
+use hrc_adapt_tests::alloc_count::{CountingAllocator, allocations_in};
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: CountingAllocator = CountingAllocator;
 
 /// A small deterministic generator (no allocation).
 struct Lcg(u64);
@@ -105,54 +70,28 @@ fn frame(k: u64, rng: &mut Lcg) -> CueFrame {
 }
 
 fn workspace() -> Workspace {
-    Workspace::from_toml_str(
-        r#"
-        [[area]]
-        name = "assembly"
-        role = "assembly"
-        min_m = [0.3, -0.3, 0.7]
-        max_m = [0.8, 0.3, 0.9]
-        [[area]]
-        name = "storage"
-        role = "tool_identification"
-        min_m = [-0.2, 0.5, 0.7]
-        max_m = [0.3, 0.9, 0.9]
-        [[area]]
-        name = "instruction"
-        role = "instruction"
-        min_m = [-0.2, -0.9, 1.0]
-        max_m = [0.3, -0.5, 1.5]
-        [[area]]
-        name = "handover"
-        role = "collaboration"
-        centre_m = [0.9, 0.6, 1.0]
-        size_m = [0.3, 0.3, 0.3]
-        yaw_deg = 30
-        "#,
-    )
-    .unwrap()
+    Workspace::from_toml_file(hrc_adapt_tests::config_dir().join("example-workspace.toml")).unwrap()
 }
 
 fn allocations_during(cfg: AssessConfig, frames: u64) -> u64 {
     let mut a = Assessor::new(workspace(), cfg).unwrap();
     let mut rng = Lcg(42);
-    ALLOCATIONS.with(|n| n.set(0));
-    COUNTING.with(|on| on.set(true));
     let mut valid = 0u64;
     let mut hes = 0u64;
     let mut dominant = 0u64;
-    for k in 0..frames {
-        let out = a.update(&frame(k, &mut rng));
-        valid += out.valid as u64;
-        hes += out.hesitating as u64;
-        dominant += out.dominant.indicator.is_some() as u64;
-    }
-    COUNTING.with(|on| on.set(false));
+    let ((), allocations) = allocations_in(|| {
+        for k in 0..frames {
+            let out = a.update(&frame(k, &mut rng));
+            valid += out.valid as u64;
+            hes += out.hesitating as u64;
+            dominant += out.dominant.indicator.is_some() as u64;
+        }
+    });
     // The run must have exercised the interesting paths, or the test proves little.
     assert!(valid > frames / 2, "valid frames: {valid}");
     assert!(hes > 0, "no hesitation frames");
     assert!(dominant > 0, "no dominant indicator");
-    ALLOCATIONS.with(|n| n.get())
+    allocations
 }
 
 #[test]
@@ -173,11 +112,8 @@ fn update_allocates_nothing_when_the_window_ring_overflows() {
 
 #[test]
 fn the_counter_counts() {
-    // Guard against a counter that can't fail: a Vec push inside the counted region counts.
-    ALLOCATIONS.with(|n| n.set(0));
-    COUNTING.with(|on| on.set(true));
-    let v: Vec<u64> = std::hint::black_box(Vec::with_capacity(8));
-    COUNTING.with(|on| on.set(false));
+    // Guard against a counter that can't fail: an allocation inside the counted region counts.
+    let (v, n) = allocations_in(|| std::hint::black_box(Vec::<u64>::with_capacity(8)));
     drop(v);
-    assert_eq!(ALLOCATIONS.with(|n| n.get()), 1);
+    assert_eq!(n, 1);
 }

@@ -7,10 +7,9 @@
 //! and reconnect tasks run (and allocate as they please) on a tokio runtime's worker threads.
 //! Each test is bounded in time (the loops are bounded, the awaits have timeouts).
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::time::{Duration, Instant};
 
+use hrc_adapt_tests::alloc_count::{CountingAllocator, allocations_in};
 use robot_io::client::{ClientConfig, LinkState, RtdeClient};
 use robot_io::codec::Value;
 use robot_io::emulator::{Emulator, EmulatorConfig, SimBackend};
@@ -18,57 +17,8 @@ use robot_io::rtde_robot::{RtdeRobot, RtdeRobotConfig};
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Robot, RobotIoError, RobotState};
 
-struct CountingAllocator;
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-}
-
-fn note_allocation() {
-    // `try_with`: thread-locals may be gone during thread teardown.
-    if COUNTING.try_with(Cell::get).unwrap_or(false) {
-        let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
-    }
-}
-
-// SAFETY: defers every operation to `System`; only counts.
-unsafe impl GlobalAlloc for CountingAllocator {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        note_allocation();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        note_allocation();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc_zeroed(layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        note_allocation();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
 #[global_allocator]
 static GLOBAL: CountingAllocator = CountingAllocator;
-
-/// Count allocations made by `f` on this thread.
-fn allocations_in<R>(f: impl FnOnce() -> R) -> (u64, R) {
-    let before = ALLOCATIONS.with(Cell::get);
-    COUNTING.with(|c| c.set(true));
-    let r = f();
-    COUNTING.with(|c| c.set(false));
-    (ALLOCATIONS.with(Cell::get) - before, r)
-}
 
 /// A runtime whose workers run the emulator and the client; the test thread only calls the
 /// synchronous hot-path methods (and `block_on` outside the counted sections).
@@ -101,7 +51,7 @@ fn wait_until(limit: Duration, what: &str, mut cond: impl FnMut() -> bool) {
 
 #[test]
 fn the_counter_sees_allocations() {
-    let (n, v) = allocations_in(|| Vec::<u64>::with_capacity(16));
+    let (v, n) = allocations_in(|| Vec::<u64>::with_capacity(16));
     std::hint::black_box(v);
     assert_eq!(n, 1);
 }
@@ -138,7 +88,7 @@ fn rtde_robot_read_state_and_send_allocate_nothing_connected_and_link_down() {
 
     // Connected: 500 cycles of 2 ms, the control thread's loop.
     let t0 = state.timestamp_s;
-    let (n, ok_reads) = allocations_in(|| {
+    let (ok_reads, n) = allocations_in(|| {
         let mut ok = 0u32;
         for cycle in 0..500_usize {
             if robot.read_state(&mut state).is_ok() {
@@ -165,7 +115,7 @@ fn rtde_robot_read_state_and_send_allocate_nothing_connected_and_link_down() {
     wait_until(Duration::from_secs(10), "the link to go down", || {
         robot.client().link_state() != LinkState::Up
     });
-    let (n, (down, other)) = allocations_in(|| {
+    let ((down, other), n) = allocations_in(|| {
         let (mut down, mut other) = (0u32, 0u32);
         for cycle in 0..200_usize {
             match robot.read_state(&mut state) {
@@ -210,7 +160,7 @@ fn a_closed_client_reports_without_allocating() {
     wait_until(Duration::from_secs(10), "the client to close", || {
         client.link_state() == LinkState::Closed
     });
-    let (n, closed) = allocations_in(|| {
+    let (closed, n) = allocations_in(|| {
         let mut closed = 0u32;
         for _ in 0..100 {
             // Drain what was received before the cut, then the closed error.

@@ -4,69 +4,18 @@
 //! A counting global allocator wraps `System`. The switch and the counter are thread-local, so
 //! only the thread under test is counted and tests running in parallel do not disturb it.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
+use hrc_adapt_tests::alloc_count::{CountingAllocator, allocations_in};
 use robot_io::replay::{Pacing, ReplayRobot};
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::trace::Trace;
 use robot_io::{JointCommand, Robot, RobotState};
 
-struct CountingAllocator;
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-}
-
-fn note_allocation() {
-    // `try_with`: thread-locals may be gone during thread teardown.
-    if COUNTING.try_with(Cell::get).unwrap_or(false) {
-        let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
-    }
-}
-
-// SAFETY: defers every operation to `System`; only counts.
-unsafe impl GlobalAlloc for CountingAllocator {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        note_allocation();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        note_allocation();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc_zeroed(layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        note_allocation();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
 #[global_allocator]
 static GLOBAL: CountingAllocator = CountingAllocator;
 
-/// Count allocations made by `f` on this thread.
-fn allocations_in(f: impl FnOnce()) -> u64 {
-    let before = ALLOCATIONS.with(Cell::get);
-    COUNTING.with(|c| c.set(true));
-    f();
-    COUNTING.with(|c| c.set(false));
-    ALLOCATIONS.with(Cell::get) - before
-}
-
 #[test]
 fn the_counter_sees_allocations() {
-    let n = allocations_in(|| {
+    let ((), n) = allocations_in(|| {
         let v: Vec<u64> = Vec::with_capacity(16);
         std::hint::black_box(v);
     });
@@ -89,7 +38,7 @@ fn sim_robot_cycles_allocate_nothing() {
             gain: 300.0,
         },
     ];
-    let n = allocations_in(|| {
+    let ((), n) = allocations_in(|| {
         for cycle in 0..10_000_usize {
             robot.read_state(&mut state).unwrap();
             let cmd = commands.get(cycle / 1000 % 3).unwrap();
@@ -127,7 +76,7 @@ fn replay_robot_reads_and_sends_allocate_nothing() {
     let mut state = RobotState::default();
     let cmd = JointCommand::Stop { decel: 1.0 };
     let mut clocked_reads = 0;
-    let n = allocations_in(|| {
+    let ((), n) = allocations_in(|| {
         for _ in 0..rows {
             per_read.read_state(&mut state).unwrap();
             per_read.send(&cmd).unwrap();
