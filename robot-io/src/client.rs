@@ -252,19 +252,6 @@ struct Connection {
     version: ControllerVersion,
 }
 
-fn map_connect_error(e: std::io::Error, addr: &str) -> RobotIoError {
-    if e.kind() == std::io::ErrorKind::ConnectionRefused {
-        RobotIoError::ConnectionRefused {
-            addr: addr.to_owned(),
-        }
-    } else {
-        RobotIoError::Io {
-            context: format!("connecting to {addr}"),
-            source: e,
-        }
-    }
-}
-
 /// Reads one whole package into `buf` (cleared first; at most 65535 bytes).
 async fn read_package<R: tokio::io::AsyncRead + Unpin>(r: &mut R, buf: &mut Vec<u8>) -> Result<()> {
     let io = |source| RobotIoError::Io {
@@ -347,7 +334,7 @@ async fn request(
 async fn handshake(cfg: &ClientConfig) -> Result<(Connection, Recipe, Vec<Recipe>)> {
     let addr = format!("{}:{}", cfg.host, cfg.port);
     let stream = match tokio::time::timeout(cfg.reply_timeout, TcpStream::connect(&addr)).await {
-        Ok(r) => r.map_err(|e| map_connect_error(e, &addr))?,
+        Ok(r) => r.map_err(|e| RobotIoError::connecting(e, &addr))?,
         Err(_) => {
             return Err(RobotIoError::Timeout {
                 what: "the tcp connection",

@@ -188,16 +188,7 @@ impl DashboardClient {
                 what: "the dashboard connection",
                 after_ms: ms(timeout),
             })?
-            .map_err(|e| {
-                if e.kind() == std::io::ErrorKind::ConnectionRefused {
-                    RobotIoError::ConnectionRefused { addr: addr.clone() }
-                } else {
-                    RobotIoError::Io {
-                        context: format!("connecting to {addr}"),
-                        source: e,
-                    }
-                }
-            })?;
+            .map_err(|e| RobotIoError::connecting(e, &addr))?;
         let (r, w) = stream.into_split();
         let mut c = DashboardClient {
             reader: BufReader::new(r),

@@ -206,5 +206,22 @@ pub enum RobotIoError {
     },
 }
 
+impl RobotIoError {
+    /// The error of a failed TCP connect to `addr`: [`RobotIoError::ConnectionRefused`] when
+    /// nothing listens there, [`RobotIoError::Io`] otherwise.
+    pub(crate) fn connecting(e: std::io::Error, addr: &str) -> Self {
+        if e.kind() == std::io::ErrorKind::ConnectionRefused {
+            Self::ConnectionRefused {
+                addr: addr.to_owned(),
+            }
+        } else {
+            Self::Io {
+                context: format!("connecting to {addr}"),
+                source: e,
+            }
+        }
+    }
+}
+
 /// Result alias of this crate.
 pub type Result<T, E = RobotIoError> = std::result::Result<T, E>;

@@ -256,16 +256,9 @@ impl ScriptSender {
         let addr = format!("{}:{}", self.host, self.port);
         let io = |context: String| move |source| RobotIoError::Io { context, source };
         let work = async {
-            let mut s = TcpStream::connect(&addr).await.map_err(|e| {
-                if e.kind() == std::io::ErrorKind::ConnectionRefused {
-                    RobotIoError::ConnectionRefused { addr: addr.clone() }
-                } else {
-                    RobotIoError::Io {
-                        context: format!("connecting to {addr}"),
-                        source: e,
-                    }
-                }
-            })?;
+            let mut s = TcpStream::connect(&addr)
+                .await
+                .map_err(|e| RobotIoError::connecting(e, &addr))?;
             s.write_all(script.as_bytes())
                 .await
                 .map_err(io(format!("sending script to {addr}")))?;
