@@ -2,7 +2,10 @@
 //! module and calls into the library crates.
 
 mod assess_cmd;
+mod experiment;
 mod robot_cmd;
+mod stats;
+mod trial;
 
 use clap::{Parser, Subcommand};
 
@@ -22,6 +25,10 @@ enum Command {
     Record(robot_cmd::RecordArgs),
     /// Serve a UR controller emulator (RTDE, dashboard, script ports) on loopback.
     Emulate(robot_cmd::EmulateArgs),
+    /// Run one adaptive handover trial (simulated operator + emulator by default).
+    Trial(trial::TrialArgs),
+    /// Run a policy A/B experiment from a schedule and report its statistics.
+    Experiment(experiment::ExperimentArgs),
     /// Print configuration files.
     Config(ConfigArgs),
 }
@@ -45,6 +52,8 @@ fn main() -> anyhow::Result<()> {
         Command::Assess(args) => assess_cmd::run(args),
         Command::Record(args) => robot_cmd::record(args),
         Command::Emulate(args) => robot_cmd::emulate(args),
+        Command::Trial(args) => trial::run(args),
+        Command::Experiment(args) => experiment::run(args),
         Command::Config(args) => {
             anyhow::ensure!(args.print_default, "nothing to do: pass --print-default");
             print!("{}", assess::AssessConfig::default().to_toml_string());
