@@ -1,5 +1,6 @@
 //! `hrc-adapt trial`: one closed-loop adaptive handover trial (issue 5; being written).
 
+mod events;
 mod log;
 mod operator;
 mod report;
