@@ -1,0 +1,1 @@
+//! Agreement with scipy on the committed fixture (filled in below).
