@@ -1,1 +1,642 @@
-//! (issue 5: being written)
+//! The trial log: every stream and event of one trial, written into its run folder.
+//!
+//! [`TrialLog::create`] opens the files; the runtime then feeds it:
+//! - at the camera rate (30 Hz): [`TrialLog::cues`], [`TrialLog::assessment`],
+//!   [`TrialLog::adaptation`];
+//! - at the control rate (500 Hz): [`TrialLog::robot_state`], [`TrialLog::command`],
+//!   [`TrialLog::human_distance`], and [`TrialLog::event`] from anywhere;
+//!
+//! and [`TrialLog::finish`] closes it and writes the summary and the report.
+//!
+//! # Files (see ARCHITECTURE.md, "Files a trial leaves")
+//! - `trial.mcap`: every stream on its own channel with a JSON schema (`log_mcap.rs` lists the
+//!   topics and schemas), zstd-compressed chunks. A chunk is closed and flushed to the file every
+//!   [`LogOptions::chunk_period_s`] of trial time, so a process killed with SIGKILL leaves a file
+//!   the `mcap` reader reads (with `IgnoreEndMagic`) up to its last complete chunk.
+//! - `indicators.csv`: the `hrc-adapt assess` table (`report::table`), one row per assessment.
+//! - `robot.csv`: ur_rtde-style trace (`robot_io::trace::TraceWriter`, [`STATE_FIELD_NAMES`]),
+//!   readable back by `robot_io::trace::Trace::read` and so by `ReplayRobot`.
+//! - `summary.json`: `log_summary.rs`.
+//! - `report.html` and its PNG plots: `report.rs`.
+//!
+//! Robot state goes to `/robot/state` and `robot.csv` decimated to 100 Hz (one sample per
+//! 10 ms of trial time; [`LogOptions::robot_full_rate`] keeps every sample). Separation
+//! samples are decimated the same way. Commands and events are all kept.
+//!
+//! # Threads and the control path
+//! The control-rate methods only copy a `Copy` record into a ring preallocated at
+//! [`TrialLog::create`] ([`LogOptions::ring_capacity`] records): no allocation, no formatting, no
+//! I/O. The ring is drained (formatted, compressed, written) by the next camera-rate call, and
+//! by [`TrialLog::finish`]. This is a **buffered synchronous writer**: right for the simulated
+//! trial (one thread, mock clock), where draining happens between control cycles. Should the
+//! ring fill before a camera-rate call drains it, the control-rate call drains it itself (counted
+//! in [`TrialFiles::synchronous_drains`]). For a real-robot runtime with its own control thread,
+//! the plan in ARCHITECTURE.md ("Log writer: drains a preallocated ring from the control
+//! thread") is to move the drain behind a single-producer ring of the same records; the record
+//! type and the drain are written so that only the hand-off changes.
+
+#[path = "log_mcap.rs"]
+pub(crate) mod mcap_out;
+#[path = "log_summary.rs"]
+pub(crate) mod summary;
+#[cfg(test)]
+#[path = "log_tests.rs"]
+mod tests;
+
+use std::borrow::Cow;
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, anyhow};
+use robot_io::trace::{STATE_FIELD_NAMES, TraceWriter, WriteOptions, state_to_row};
+use robot_io::{JointCommand, RobotState};
+use safety::Verdict;
+use serde::Serialize;
+
+use super::events::TrialEvent;
+use super::report;
+use super::report::assess_report::table::IndicatorTable;
+use mcap_out::ch;
+use summary::FrameRecord;
+
+/// The MCAP file, inside the run folder.
+pub(crate) const MCAP_FILE: &str = "trial.mcap";
+/// The indicator table.
+pub(crate) const INDICATORS_FILE: &str = "indicators.csv";
+/// The robot trace.
+pub(crate) const ROBOT_FILE: &str = "robot.csv";
+/// The summary.
+pub(crate) const SUMMARY_FILE: &str = "summary.json";
+
+/// Who, what and how: written into `summary.json`, `/trial/meta` and the report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) struct TrialMeta {
+    /// Participant id.
+    pub(crate) participant: String,
+    /// Task condition (`L1`, `L2`, `L3`).
+    pub(crate) condition: String,
+    /// Policy name (`fixed`, `adaptive`).
+    pub(crate) policy: String,
+    /// Seed of the simulation (and of anything random in the trial).
+    pub(crate) seed: u64,
+    /// The operator is simulated: the data is not from a person.
+    pub(crate) simulated: bool,
+    /// Wall-clock start, ISO 8601 UTC (`2026-01-01T12:00:00Z`).
+    pub(crate) started_utc: String,
+    /// The robot backend (`sim`, `emulator`, or the UR5e's address).
+    pub(crate) robot: String,
+}
+
+/// How the log records.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct LogOptions {
+    /// Keep every robot state sample instead of decimating to 100 Hz.
+    pub(crate) robot_full_rate: bool,
+    /// Close (and flush) an MCAP chunk at least this often, in trial time [s] (> 0). Bounds what
+    /// a killed process loses.
+    pub(crate) chunk_period_s: f64,
+    /// Control-rate records held between drains (≥ 1).
+    pub(crate) ring_capacity: usize,
+    /// HRC-CWL where the category becomes medium [-] (for the report's bands).
+    pub(crate) cwl_medium_from: f64,
+    /// HRC-CWL where the category becomes high [-].
+    pub(crate) cwl_high_from: f64,
+    /// The assessor's sliding window [s] (for the report's legends).
+    pub(crate) window_horizon_s: f64,
+    /// Render `report.html` and its plots in [`TrialLog::finish`].
+    pub(crate) write_report: bool,
+}
+
+impl Default for LogOptions {
+    /// 100 Hz robot state, 1 s chunks, 4096 records of ring (8 s at 500 Hz), the assessor's
+    /// default category thresholds and window, with the report.
+    fn default() -> Self {
+        let cfg = assess::AssessConfig::default();
+        Self {
+            robot_full_rate: false,
+            chunk_period_s: 1.0,
+            ring_capacity: 4096,
+            cwl_medium_from: cfg.composite.medium_from,
+            cwl_high_from: cfg.composite.high_from,
+            window_horizon_s: cfg.window.horizon_s,
+            write_report: true,
+        }
+    }
+}
+
+/// The files a finished log left, and what went into them.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct TrialFiles {
+    /// The run folder.
+    pub(crate) dir: PathBuf,
+    /// `trial.mcap`.
+    pub(crate) mcap: PathBuf,
+    /// `indicators.csv`.
+    pub(crate) indicators_csv: PathBuf,
+    /// `robot.csv`.
+    pub(crate) robot_csv: PathBuf,
+    /// `summary.json`.
+    pub(crate) summary_json: PathBuf,
+    /// `report.html` (when [`LogOptions::write_report`]).
+    pub(crate) report_html: Option<PathBuf>,
+    /// The report's PNG plots.
+    pub(crate) plots: Vec<PathBuf>,
+    /// Messages written per MCAP topic.
+    pub(crate) message_counts: BTreeMap<String, u64>,
+    /// Times a control-rate call found the ring full and drained it itself.
+    pub(crate) synchronous_drains: u64,
+}
+
+/// A control-rate record, copied into the ring as is.
+// Records are `Copy` and of one size in a ring preallocated once; boxing the robot state would
+// allocate on every control-rate call.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone, Copy)]
+enum HotRecord {
+    State(f64, RobotState),
+    Command(f64, JointCommand, Verdict),
+    Distance(f64, Option<f64>),
+    Event(f64, TrialEvent),
+}
+
+/// What the report plots of one adaptation [-] and [s].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct AdaptationRecord {
+    /// Time [s].
+    pub(crate) t_s: f64,
+    /// Speed scale [-].
+    pub(crate) speed_scale: f64,
+    /// Acceleration scale [-].
+    pub(crate) acceleration_scale: f64,
+    /// Jerk scale [-].
+    pub(crate) jerk_scale: f64,
+    /// Start delay [s].
+    pub(crate) start_delay_s: f64,
+    /// Minimum approach duration [s].
+    pub(crate) min_approach_duration_s: f64,
+    /// The active rule's indicator (`none`).
+    pub(crate) indicator: &'static str,
+}
+
+/// What the report plots of one assessment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct IndicatorRecord {
+    /// The plot sample the `assess` figure uses.
+    pub(crate) sample: report::assess_report::Sample,
+    /// Windowed normalised components AED, TID, ICD, ASD̃, OHD [-].
+    pub(crate) windowed: [f64; 5],
+    /// The reported dominant indicator.
+    pub(crate) dominant: Option<assess::Indicator>,
+}
+
+/// Everything kept in memory for the summary and the report (camera-rate and decimated data).
+#[derive(Debug, Default)]
+pub(crate) struct Recorded {
+    /// Per assessment, for the summary.
+    pub(crate) frames: Vec<FrameRecord>,
+    /// Per assessment, for the plots.
+    pub(crate) indicators: Vec<IndicatorRecord>,
+    /// Per adaptation.
+    pub(crate) adaptations: Vec<AdaptationRecord>,
+    /// (t [s], TCP speed [m/s]) per logged robot state.
+    pub(crate) tcp_speed: Vec<(f64, f64)>,
+    /// (t [s], minimum human distance [m]) per logged separation sample.
+    pub(crate) distance: Vec<(f64, Option<f64>)>,
+    /// Every event.
+    pub(crate) events: Vec<(f64, TrialEvent)>,
+}
+
+/// Decimates a sampled stream to one sample per period.
+#[derive(Debug, Clone, Copy)]
+struct Decimator {
+    period_s: f64,
+    last: Option<f64>,
+}
+
+impl Decimator {
+    fn new(period_s: f64) -> Self {
+        Self {
+            period_s,
+            last: None,
+        }
+    }
+
+    /// Keep the sample at `t_s`? (A relative tolerance absorbs clock rounding.)
+    fn keep(&mut self, t_s: f64) -> bool {
+        let keep = self
+            .last
+            .is_none_or(|l| t_s - l >= self.period_s * (1.0 - 1e-6));
+        if keep {
+            self.last = Some(t_s);
+        }
+        keep
+    }
+}
+
+/// 100 Hz.
+const DECIMATED_PERIOD_S: f64 = 0.01;
+
+/// The log of one trial. See the module docs.
+pub(crate) struct TrialLog {
+    dir: PathBuf,
+    meta: TrialMeta,
+    options: LogOptions,
+    mcap: mcap::Writer<BufWriter<File>>,
+    channels: [u16; mcap_out::CHANNELS.len()],
+    sequences: [u32; mcap_out::CHANNELS.len()],
+    indicators: IndicatorTable<BufWriter<File>>,
+    robot: TraceWriter<BufWriter<File>>,
+    ring: Vec<HotRecord>,
+    state_decimator: Decimator,
+    distance_decimator: Decimator,
+    buf: Vec<u8>,
+    row: [f64; 44],
+    next_chunk_t: f64,
+    recorded: Recorded,
+    synchronous_drains: u64,
+}
+
+impl std::fmt::Debug for TrialLog {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TrialLog")
+            .field("dir", &self.dir)
+            .field("meta", &self.meta)
+            .field("options", &self.options)
+            .field("ring_len", &self.ring.len())
+            .field("sequences", &self.sequences)
+            .finish_non_exhaustive()
+    }
+}
+
+fn ns(t_s: f64) -> u64 {
+    if t_s.is_finite() && t_s > 0.0 {
+        (t_s * 1e9).round() as u64
+    } else {
+        0
+    }
+}
+
+impl TrialLog {
+    /// Creates `dir` (if needed) and its log files, and writes the channel schemas and the
+    /// trial's identity.
+    pub(crate) fn create(
+        dir: &Path,
+        meta: &TrialMeta,
+        options: LogOptions,
+    ) -> anyhow::Result<Self> {
+        anyhow::ensure!(
+            options.chunk_period_s > 0.0 && options.ring_capacity > 0,
+            "log options: chunk_period_s must be > 0 and ring_capacity ≥ 1"
+        );
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the run folder {}", dir.display()))?;
+        let open = |name: &str| {
+            let p = dir.join(name);
+            File::create(&p)
+                .map(BufWriter::new)
+                .with_context(|| format!("cannot create {}", p.display()))
+        };
+        let write_options = mcap::WriteOptions::new()
+            .compression(Some(mcap::Compression::Zstd))
+            .profile("")
+            .library("hrc-adapt")
+            // Chunks close on `chunk_period_s` of trial time, or at 4 MiB, whichever is first.
+            .chunk_size(Some(4 << 20));
+        let mut mcap = write_options
+            .create(open(MCAP_FILE)?)
+            .context("cannot start trial.mcap")?;
+        let mut channels = [0u16; mcap_out::CHANNELS.len()];
+        for (id, c) in channels.iter_mut().zip(mcap_out::CHANNELS) {
+            let schema = mcap.add_schema(c.schema_name, "jsonschema", c.schema.as_bytes())?;
+            *id = mcap.add_channel(schema, c.topic, "json", &BTreeMap::new())?;
+        }
+        let indicators =
+            IndicatorTable::new(open(INDICATORS_FILE)?).context("cannot start indicators.csv")?;
+        let robot = TraceWriter::new(
+            open(ROBOT_FILE)?,
+            &STATE_FIELD_NAMES,
+            &WriteOptions::ur_rtde(),
+        )
+        .context("cannot start robot.csv")?;
+        let mut log = Self {
+            dir: dir.to_path_buf(),
+            meta: meta.clone(),
+            ring: Vec::with_capacity(options.ring_capacity),
+            options,
+            mcap,
+            channels,
+            sequences: [0; mcap_out::CHANNELS.len()],
+            indicators,
+            robot,
+            state_decimator: Decimator::new(DECIMATED_PERIOD_S),
+            distance_decimator: Decimator::new(DECIMATED_PERIOD_S),
+            buf: Vec::with_capacity(4096),
+            row: [0.0; 44],
+            next_chunk_t: 0.0,
+            recorded: Recorded::default(),
+            synchronous_drains: 0,
+        };
+        let meta_json = serde_json::to_vec(meta)?;
+        log.write(ch::META, 0.0, &meta_json)?;
+        // The schemas and the identity reach the file at once.
+        log.mcap.flush()?;
+        log.next_chunk_t = log.options.chunk_period_s;
+        Ok(log)
+    }
+
+    /// The run folder.
+    pub(crate) fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Writes one message on channel `c` at trial time `t_s` [s].
+    fn write(&mut self, c: usize, t_s: f64, data: &[u8]) -> anyhow::Result<()> {
+        let (Some(&channel_id), Some(seq)) = (self.channels.get(c), self.sequences.get_mut(c))
+        else {
+            return Err(anyhow!("no channel {c}"));
+        };
+        *seq = seq.wrapping_add(1);
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence: *seq,
+            log_time: ns(t_s),
+            publish_time: ns(t_s),
+        };
+        self.mcap.write_to_known_channel(&header, data)?;
+        Ok(())
+    }
+
+    /// Writes a `serde_json` value on channel `c`.
+    fn write_value(&mut self, c: usize, t_s: f64, v: &serde_json::Value) -> anyhow::Result<()> {
+        let mut buf = std::mem::take(&mut self.buf);
+        buf.clear();
+        let res = serde_json::to_writer(&mut buf, v)
+            .map_err(anyhow::Error::from)
+            .and_then(|()| self.write(c, t_s, &buf));
+        self.buf = buf;
+        res
+    }
+
+    /// Closes the current chunk and flushes every file once `t_s` passes the chunk period.
+    fn maybe_close_chunk(&mut self, t_s: f64) -> anyhow::Result<()> {
+        if t_s >= self.next_chunk_t {
+            self.mcap.flush()?;
+            self.robot.flush()?;
+            while self.next_chunk_t <= t_s {
+                self.next_chunk_t += self.options.chunk_period_s;
+            }
+        }
+        Ok(())
+    }
+
+    /// Formats and writes every record in the ring.
+    fn drain(&mut self) -> anyhow::Result<()> {
+        let ring = std::mem::take(&mut self.ring);
+        let mut res = Ok(());
+        for rec in &ring {
+            res = self.write_hot(rec);
+            if res.is_err() {
+                break;
+            }
+        }
+        self.ring = ring;
+        self.ring.clear();
+        res
+    }
+
+    fn write_hot(&mut self, rec: &HotRecord) -> anyhow::Result<()> {
+        let mut buf = std::mem::take(&mut self.buf);
+        let res = (|| -> anyhow::Result<()> {
+            match *rec {
+                HotRecord::State(t, ref s) => {
+                    mcap_out::robot_state_json(&mut buf, t, s);
+                    self.write(ch::ROBOT_STATE, t, &buf)?;
+                    state_to_row(s, &mut self.row);
+                    self.robot.write_row(&self.row)?;
+                    self.recorded
+                        .tcp_speed
+                        .push((t, mcap_out::tcp_speed_m_s(s)));
+                    self.maybe_close_chunk(t)?;
+                }
+                HotRecord::Command(t, ref c, ref v) => {
+                    mcap_out::command_json(&mut buf, t, c, v);
+                    self.write(ch::COMMAND, t, &buf)?;
+                    self.maybe_close_chunk(t)?;
+                }
+                HotRecord::Distance(t, d) => {
+                    mcap_out::separation_json(&mut buf, t, d);
+                    self.write(ch::SEPARATION, t, &buf)?;
+                    self.recorded.distance.push((t, d));
+                }
+                HotRecord::Event(t, ref e) => {
+                    let c = mcap_out::event_json(&mut buf, t, e);
+                    self.write(c, t, &buf)?;
+                    self.recorded.events.push((t, *e));
+                }
+            }
+            Ok(())
+        })();
+        self.buf = buf;
+        res
+    }
+
+    /// Queues a control-rate record; drains first if the ring is full.
+    fn push(&mut self, rec: HotRecord) -> anyhow::Result<()> {
+        if self.ring.len() == self.ring.capacity() {
+            self.synchronous_drains += 1;
+            self.drain()?;
+        }
+        self.ring.push(rec);
+        Ok(())
+    }
+
+    /// Logs the cue frame given to the assessor at trial time `t_s` [s] (camera rate).
+    pub(crate) fn cues(&mut self, t_s: f64, frame: &assess::CueFrame) -> anyhow::Result<()> {
+        self.drain()?;
+        self.write_value(ch::CUES, t_s, &mcap_out::cues_value(t_s, frame))?;
+        self.maybe_close_chunk(t_s)
+    }
+
+    /// Logs an assessment (camera rate): `/assessment`, a row of `indicators.csv`, and what the
+    /// summary and the report need.
+    pub(crate) fn assessment(
+        &mut self,
+        t_s: f64,
+        a: &assess::Assessment,
+        ws: &assess::Workspace,
+    ) -> anyhow::Result<()> {
+        self.drain()?;
+        self.write_value(ch::ASSESSMENT, t_s, &mcap_out::assessment_value(t_s, a, ws))?;
+        self.indicators
+            .write(ws, a)
+            .context("cannot write indicators.csv")?;
+        self.recorded.frames.push(FrameRecord::of(a));
+        let w = &a.windowed;
+        self.recorded.indicators.push(IndicatorRecord {
+            sample: report::assess_report::Sample::of(a),
+            windowed: [w.aed, w.tid, w.icd, w.asd_norm, w.ohd],
+            dominant: a.dominant.indicator,
+        });
+        self.maybe_close_chunk(t_s)
+    }
+
+    /// Logs the policy's adaptation (camera rate).
+    pub(crate) fn adaptation(&mut self, t_s: f64, a: &policies::Adaptation) -> anyhow::Result<()> {
+        self.drain()?;
+        self.write_value(ch::ADAPTATION, t_s, &mcap_out::adaptation_value(t_s, a)?)?;
+        self.recorded.adaptations.push(AdaptationRecord {
+            t_s,
+            speed_scale: a.speed_scale.get(),
+            acceleration_scale: a.acceleration_scale.get(),
+            jerk_scale: a.jerk_scale.get(),
+            start_delay_s: a.timing.start_delay_s,
+            min_approach_duration_s: a.timing.min_approach_duration_s,
+            indicator: policies::indicator_key(a.reason.indicator),
+        });
+        self.maybe_close_chunk(t_s)
+    }
+
+    /// Logs a robot state (control rate; decimated to 100 Hz unless
+    /// [`LogOptions::robot_full_rate`]). Copies into the ring: no allocation, no I/O (unless
+    /// the ring is full).
+    pub(crate) fn robot_state(&mut self, t_s: f64, state: &RobotState) -> anyhow::Result<()> {
+        if self.options.robot_full_rate || self.state_decimator.keep(t_s) {
+            self.push(HotRecord::State(t_s, *state))?;
+        }
+        Ok(())
+    }
+
+    /// Logs the command the controller asked for and the supervisor's verdict on it (control
+    /// rate; every command). Copies into the ring.
+    pub(crate) fn command(
+        &mut self,
+        t_s: f64,
+        cmd: &JointCommand,
+        verdict: &Verdict,
+    ) -> anyhow::Result<()> {
+        self.push(HotRecord::Command(t_s, *cmd, *verdict))
+    }
+
+    /// Logs the minimum distance between a tracked human point and the arm [m] (`None` when no
+    /// human point is tracked); decimated like the robot state. Copies into the ring.
+    pub(crate) fn human_distance(
+        &mut self,
+        t_s: f64,
+        min_distance_m: Option<f64>,
+    ) -> anyhow::Result<()> {
+        if self.options.robot_full_rate || self.distance_decimator.keep(t_s) {
+            self.push(HotRecord::Distance(t_s, min_distance_m))?;
+        }
+        Ok(())
+    }
+
+    /// Logs a trial event (any rate; copies into the ring). `Safety` events go to
+    /// `/safety/events`, the others to `/task/events`.
+    pub(crate) fn event(&mut self, t_s: f64, event: &TrialEvent) -> anyhow::Result<()> {
+        self.push(HotRecord::Event(t_s, *event))
+    }
+
+    /// Drains the ring, closes every file, writes `summary.json` and the report.
+    pub(crate) fn finish(mut self) -> anyhow::Result<TrialFiles> {
+        self.drain()?;
+        let mcap_summary = self.mcap.finish().context("cannot finish trial.mcap")?;
+        let mut message_counts = BTreeMap::new();
+        if let Some(stats) = &mcap_summary.stats {
+            for (id, n) in &stats.channel_message_counts {
+                if let Some(c) = mcap_summary.channels.get(id) {
+                    message_counts.insert(c.topic.clone(), *n);
+                }
+            }
+        }
+        let TrialLog {
+            dir,
+            meta,
+            options,
+            mcap,
+            indicators,
+            mut robot,
+            recorded,
+            synchronous_drains,
+            ..
+        } = self;
+        use std::io::Write;
+        mcap.into_inner().flush()?;
+        indicators
+            .finish()
+            .context("cannot finish indicators.csv")?
+            .flush()?;
+        robot.flush()?;
+        robot.into_inner().flush()?;
+
+        let summary = summary::compute(&meta, &recorded.frames, &recorded.events);
+        let summary_json = dir.join(SUMMARY_FILE);
+        std::fs::write(&summary_json, summary::to_json(&summary)?)
+            .with_context(|| format!("cannot write {}", summary_json.display()))?;
+
+        let (report_html, plots) = if options.write_report {
+            let r = report::write(&dir, &meta, &options, &recorded, &summary)?;
+            (Some(r.html), r.plots)
+        } else {
+            (None, Vec::new())
+        };
+        Ok(TrialFiles {
+            mcap: dir.join(MCAP_FILE),
+            indicators_csv: dir.join(INDICATORS_FILE),
+            robot_csv: dir.join(ROBOT_FILE),
+            summary_json,
+            report_html,
+            plots,
+            message_counts,
+            synchronous_drains,
+            dir,
+        })
+    }
+}
+
+/// Reads every message of an MCAP file that a reader can reach: the whole file if it is
+/// complete, else everything up to the last complete chunk (a damaged tail is ignored).
+/// Returns (topic, log time [ns], JSON text) per message, and whether the tail was damaged.
+pub(crate) fn read_mcap_messages(bytes: &[u8]) -> anyhow::Result<(Vec<ReadMessage>, bool)> {
+    let stream =
+        mcap::MessageStream::new_with_options(bytes, mcap::read::Options::IgnoreEndMagic.into())?;
+    let mut out = Vec::new();
+    for m in stream {
+        match m {
+            Ok(m) => out.push(ReadMessage {
+                topic: m.channel.topic.clone(),
+                schema: m.channel.schema.as_ref().map(|s| {
+                    (
+                        s.name.clone(),
+                        s.encoding.clone(),
+                        String::from_utf8_lossy(&s.data).into_owned(),
+                    )
+                }),
+                message_encoding: m.channel.message_encoding.clone(),
+                log_time_ns: m.log_time,
+                data: match m.data {
+                    Cow::Borrowed(b) => b.to_vec(),
+                    Cow::Owned(v) => v,
+                },
+            }),
+            Err(_) => return Ok((out, true)),
+        }
+    }
+    Ok((out, false))
+}
+
+/// One message read back by [`read_mcap_messages`].
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct ReadMessage {
+    /// The channel's topic.
+    pub(crate) topic: String,
+    /// The channel's schema: (name, encoding, text).
+    pub(crate) schema: Option<(String, String, String)>,
+    /// The channel's message encoding.
+    pub(crate) message_encoding: String,
+    /// Log time [ns].
+    pub(crate) log_time_ns: u64,
+    /// The message bytes.
+    pub(crate) data: Vec<u8>,
+}

@@ -1,1 +1,877 @@
-//! (issue 5: being written)
+//! `report.html`: one self-contained page per trial (the PNG plots are embedded as base64 data
+//! URIs and also left next to it as files).
+//!
+//! Plots (time axis: trial time [s]):
+//! - `report_indicators.png`: the windowed normalised indicators (AED, TID, ICD, ASD̃, OHD) with
+//!   the reported dominant indicator as a coloured band above them;
+//! - `indicator_dynamics.png` (and its four panels): the `hrc-adapt assess` figure, from
+//!   `report::plot`;
+//! - `report_adaptation.png`: speed, acceleration and jerk scales; start delay and minimum
+//!   approach duration;
+//! - `report_robot.png`: TCP speed and the minimum human distance;
+//! - `report_handovers.png`: the handover timeline: task phases as bars, operator idle and
+//!   (simulated) hesitation as bars, Presented/Grasped/returned markers per handover.
+//!
+//! A simulated trial is labelled SIMULATED in the page title, a banner, and every plot caption.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use anyhow::{Context, anyhow};
+use assess::Indicator;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::FontStyle;
+
+use super::events::TrialEvent;
+use super::log::summary::Summary;
+use super::log::{LogOptions, Recorded, TrialMeta};
+use assess_report::plot;
+
+/// The `hrc-adapt assess` outputs (`src/report`: the indicator table and figure), included here
+/// because `assess_cmd` keeps its `report` module private. Once it is `pub(crate)`, this becomes
+/// a `use`.
+#[path = "../report/mod.rs"]
+#[allow(dead_code, clippy::duplicate_mod)]
+pub(crate) mod assess_report;
+
+/// What [`write`] left.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct ReportFiles {
+    /// `report.html`.
+    pub(crate) html: PathBuf,
+    /// Every PNG written.
+    pub(crate) plots: Vec<PathBuf>,
+}
+
+/// The page.
+pub(crate) const HTML_FILE: &str = "report.html";
+/// The dominant-indicator plot.
+pub(crate) const INDICATORS_PNG: &str = "report_indicators.png";
+/// The adaptation plot.
+pub(crate) const ADAPTATION_PNG: &str = "report_adaptation.png";
+/// The robot speed / human distance plot.
+pub(crate) const ROBOT_PNG: &str = "report_robot.png";
+/// The handover timeline.
+pub(crate) const HANDOVERS_PNG: &str = "report_handovers.png";
+
+const FAMILY: &str = "sans-serif";
+// The same font as `report::plot`, registered under the same family (registration is
+// idempotent); plot.rs keeps its registration private.
+static FONT_BYTES: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
+const PX: (u32, u32) = (1400, 560);
+
+// Okabe–Ito, as `report::plot`.
+const BLUE: RGBColor = RGBColor(0, 114, 178);
+const ORANGE: RGBColor = RGBColor(230, 159, 0);
+const GREEN: RGBColor = RGBColor(0, 158, 115);
+const VERMILION: RGBColor = RGBColor(213, 94, 0);
+const PURPLE: RGBColor = RGBColor(204, 121, 167);
+const SKY: RGBColor = RGBColor(86, 180, 233);
+const YELLOW: RGBColor = RGBColor(240, 228, 66);
+const GREY: RGBColor = RGBColor(150, 150, 150);
+
+/// Colour of an indicator (and of "none").
+fn indicator_colour(k: Option<Indicator>) -> RGBColor {
+    match k {
+        Some(Indicator::Aed) => BLUE,
+        Some(Indicator::Tid) => ORANGE,
+        Some(Indicator::Icd) => GREEN,
+        Some(Indicator::AsdCtx) => VERMILION,
+        Some(Indicator::Ohd) => PURPLE,
+        None => RGBColor(215, 215, 215),
+    }
+}
+
+fn register_font() -> anyhow::Result<()> {
+    static DONE: OnceLock<bool> = OnceLock::new();
+    let ok = *DONE.get_or_init(|| {
+        plotters::style::register_font(FAMILY, FontStyle::Normal, FONT_BYTES).is_ok()
+    });
+    anyhow::ensure!(ok, "the embedded font could not be loaded");
+    Ok(())
+}
+
+fn font(size: u32) -> TextStyle<'static> {
+    (FAMILY, size).into_font().color(&BLACK)
+}
+
+type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+type Chart<'a, 'b> = ChartContext<
+    'a,
+    BitMapBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+type Res<T> =
+    Result<T, DrawingAreaErrorKind<<BitMapBackend<'static> as DrawingBackend>::ErrorType>>;
+
+fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
+    anyhow!("plot: {e}")
+}
+
+/// A chart with a time axis, caption, units and a light grid.
+fn chart<'a, 'b>(
+    area: &'a Area<'b>,
+    caption: &str,
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+    y_desc: &str,
+    top_margin: u32,
+) -> Res<Chart<'a, 'b>> {
+    let mut c = ChartBuilder::on(area)
+        .caption(caption, font(22))
+        .margin_top(top_margin)
+        .margin_left(14)
+        .margin_right(24)
+        .margin_bottom(6)
+        .x_label_area_size(46)
+        .y_label_area_size(80)
+        .build_cartesian_2d(x, y)?;
+    c.configure_mesh()
+        .x_desc("trial time t [s]")
+        .y_desc(y_desc)
+        .axis_desc_style(font(18))
+        .label_style(font(15))
+        .x_labels(12)
+        .y_labels(6)
+        .light_line_style(TRANSPARENT)
+        .bold_line_style(BLACK.mix(0.08))
+        .draw()?;
+    Ok(c)
+}
+
+fn style(c: RGBColor, w: u32) -> ShapeStyle {
+    ShapeStyle {
+        color: c.to_rgba(),
+        filled: false,
+        stroke_width: w,
+    }
+}
+
+/// A step series: value holds until the next sample.
+fn steps(points: &[(f64, f64)], t_end: f64) -> Vec<(f64, f64)> {
+    let mut out = Vec::with_capacity(points.len() * 2 + 1);
+    for (k, &(t, v)) in points.iter().enumerate() {
+        if k > 0 {
+            out.push((t, points[k - 1].1));
+        }
+        out.push((t, v));
+    }
+    if let Some(&(_, v)) = points.last() {
+        out.push((t_end, v));
+    }
+    out
+}
+
+fn draw_series<'a, 'b: 'a>(
+    c: &mut Chart<'a, 'b>,
+    points: Vec<(f64, f64)>,
+    colour: RGBColor,
+    width: u32,
+    label: &str,
+) -> Res<()> {
+    let pts: Vec<(f64, f64)> = points
+        .into_iter()
+        .filter(|p| p.0.is_finite() && p.1.is_finite())
+        .collect();
+    c.draw_series(LineSeries::new(pts, style(colour, width)))?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style(colour, 3)));
+    Ok(())
+}
+
+fn legend<'a, 'b: 'a>(c: &mut Chart<'a, 'b>, pos: SeriesLabelPosition) -> Res<()> {
+    c.configure_series_labels()
+        .position(pos)
+        .label_font(font(15))
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK.mix(0.35))
+        .draw()
+}
+
+/// Runs of a labelled sequence: (start, end, label) with each sample holding until the next.
+fn runs<T: Copy + PartialEq>(samples: &[(f64, f64, T)]) -> Vec<(f64, f64, T)> {
+    let mut out: Vec<(f64, f64, T)> = Vec::new();
+    for &(t0, t1, v) in samples {
+        match out.last_mut() {
+            Some(last) if last.2 == v && (t0 - last.1).abs() < 1e-9 => last.1 = t1,
+            _ => out.push((t0, t1, v)),
+        }
+    }
+    out
+}
+
+fn sim_tag(meta: &TrialMeta) -> &'static str {
+    if meta.simulated { "SIMULATED — " } else { "" }
+}
+
+/// The dominant band and the windowed indicators.
+fn plot_indicators(
+    path: &Path,
+    meta: &TrialMeta,
+    rec: &Recorded,
+    x: &std::ops::Range<f64>,
+) -> anyhow::Result<()> {
+    let root = BitMapBackend::new(path, PX).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let (band, main) = root.split_vertically(120);
+    // The dominant band: each frame covers (t − Δt, t].
+    let frames: Vec<(f64, f64, Option<Indicator>)> = rec
+        .indicators
+        .iter()
+        .zip(&rec.frames)
+        .map(|(i, f)| (f.t_s - f.dt_s, f.t_s, i.dominant))
+        .collect();
+    {
+        let mut c = ChartBuilder::on(&band)
+            .caption(
+                format!(
+                    "{}Dominant indicator (coloured band) and windowed indicators",
+                    sim_tag(meta)
+                ),
+                font(22),
+            )
+            .margin_top(8)
+            .margin_left(14)
+            .margin_right(24)
+            .x_label_area_size(0)
+            .y_label_area_size(80)
+            .build_cartesian_2d(x.clone(), 0.0..1.0)
+            .map_err(err)?;
+        c.configure_mesh()
+            .disable_mesh()
+            .disable_x_axis()
+            .y_labels(0)
+            .y_desc("dominant")
+            .axis_desc_style(font(16))
+            .draw()
+            .map_err(err)?;
+        c.draw_series(
+            runs(&frames).into_iter().map(|(a, b, k)| {
+                Rectangle::new([(a, 0.0), (b, 1.0)], indicator_colour(k).filled())
+            }),
+        )
+        .map_err(err)?;
+    }
+    let mut c = chart(&main, "", x.clone(), 0.0..1.05, "windowed value [-]", 0).map_err(err)?;
+    // The band again, faint, behind the lines.
+    c.draw_series(
+        runs(&frames)
+            .into_iter()
+            .filter(|r| r.2.is_some())
+            .map(|(a, b, k)| {
+                Rectangle::new(
+                    [(a, 0.0), (b, 1.05)],
+                    indicator_colour(k).mix(0.12).filled(),
+                )
+            }),
+    )
+    .map_err(err)?;
+    let names = ["AED", "TID", "ICD", "ASD̃ (ASD_ctx, normalised)", "OHD"];
+    for (j, name) in names.iter().enumerate() {
+        let k = Indicator::ALL.get(j).copied();
+        let pts = rec
+            .indicators
+            .iter()
+            .map(|i| (i.sample.t, i.windowed.get(j).copied().unwrap_or(f64::NAN)))
+            .collect();
+        draw_series(&mut c, pts, indicator_colour(k), 2, name).map_err(err)?;
+    }
+    let pts = rec
+        .indicators
+        .iter()
+        .map(|i| (i.sample.t, i.sample.hrc_cwl_windowed))
+        .collect();
+    draw_series(&mut c, pts, BLACK, 3, "HRC-CWL (windowed)").map_err(err)?;
+    c.draw_series(std::iter::once(Rectangle::new(
+        [(x.start, 0.0), (x.start, 0.0)],
+        indicator_colour(None).filled(),
+    )))
+    .map_err(err)?
+    .label("band: none")
+    .legend(|(x, y)| {
+        Rectangle::new(
+            [(x, y - 7), (x + 24, y + 7)],
+            indicator_colour(None).filled(),
+        )
+    });
+    legend(&mut c, SeriesLabelPosition::UpperRight).map_err(err)?;
+    root.present().map_err(err)
+}
+
+/// Scales and delays over time.
+fn plot_adaptation(
+    path: &Path,
+    meta: &TrialMeta,
+    rec: &Recorded,
+    x: &std::ops::Range<f64>,
+) -> anyhow::Result<()> {
+    let root = BitMapBackend::new(path, (PX.0, 760)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let (top, bottom) = root.split_vertically(400);
+    let a = &rec.adaptations;
+    let end = x.end;
+    {
+        let mut c = chart(
+            &top,
+            &format!("{}Adaptation: speed and smoothness scales", sim_tag(meta)),
+            x.clone(),
+            0.0..1.1,
+            "scale [-]",
+            8,
+        )
+        .map_err(err)?;
+        for (name, colour, w, f) in [
+            (
+                "speed scale",
+                BLUE,
+                3,
+                (|r| r.speed_scale) as fn(&super::log::AdaptationRecord) -> f64,
+            ),
+            ("acceleration scale", ORANGE, 2, |r| r.acceleration_scale),
+            ("jerk scale", GREEN, 2, |r| r.jerk_scale),
+        ] {
+            let pts: Vec<(f64, f64)> = a.iter().map(|r| (r.t_s, f(r))).collect();
+            draw_series(&mut c, steps(&pts, end), colour, w, name).map_err(err)?;
+        }
+        legend(&mut c, SeriesLabelPosition::LowerRight).map_err(err)?;
+    }
+    let top_y = a
+        .iter()
+        .map(|r| r.start_delay_s.max(r.min_approach_duration_s))
+        .fold(1.0_f64, f64::max)
+        * 1.15;
+    let mut c = chart(
+        &bottom,
+        "Adaptation: handover timing",
+        x.clone(),
+        0.0..top_y,
+        "duration [s]",
+        8,
+    )
+    .map_err(err)?;
+    for (name, colour, f) in [
+        (
+            "start delay",
+            VERMILION,
+            (|r| r.start_delay_s) as fn(&super::log::AdaptationRecord) -> f64,
+        ),
+        ("minimum approach duration", PURPLE, |r| {
+            r.min_approach_duration_s
+        }),
+    ] {
+        let pts: Vec<(f64, f64)> = a.iter().map(|r| (r.t_s, f(r))).collect();
+        draw_series(&mut c, steps(&pts, end), colour, 3, name).map_err(err)?;
+    }
+    legend(&mut c, SeriesLabelPosition::UpperRight).map_err(err)?;
+    root.present().map_err(err)
+}
+
+/// TCP speed and minimum human distance.
+fn plot_robot(
+    path: &Path,
+    meta: &TrialMeta,
+    rec: &Recorded,
+    x: &std::ops::Range<f64>,
+) -> anyhow::Result<()> {
+    let root = BitMapBackend::new(path, (PX.0, 760)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let (top, bottom) = root.split_vertically(380);
+    let v_max = rec
+        .tcp_speed
+        .iter()
+        .map(|p| p.1)
+        .filter(|v| v.is_finite())
+        .fold(0.1_f64, f64::max)
+        * 1.15;
+    {
+        let mut c = chart(
+            &top,
+            &format!("{}Robot TCP speed", sim_tag(meta)),
+            x.clone(),
+            0.0..v_max,
+            "speed [m/s]",
+            8,
+        )
+        .map_err(err)?;
+        draw_series(&mut c, rec.tcp_speed.clone(), BLUE, 2, "TCP speed |v|").map_err(err)?;
+        legend(&mut c, SeriesLabelPosition::UpperRight).map_err(err)?;
+    }
+    let d_max = rec
+        .distance
+        .iter()
+        .filter_map(|p| p.1)
+        .filter(|v| v.is_finite())
+        .fold(0.5_f64, f64::max)
+        * 1.15;
+    let mut c = chart(
+        &bottom,
+        "Minimum human–robot distance",
+        x.clone(),
+        0.0..d_max,
+        "distance [m]",
+        8,
+    )
+    .map_err(err)?;
+    // Untracked spans break the line.
+    let mut segment: Vec<(f64, f64)> = Vec::new();
+    let mut segments = Vec::new();
+    for &(t, d) in &rec.distance {
+        match d {
+            Some(d) if d.is_finite() => segment.push((t, d)),
+            _ => segments.push(std::mem::take(&mut segment)),
+        }
+    }
+    segments.push(segment);
+    let mut labelled = false;
+    for s in segments.into_iter().filter(|s| !s.is_empty()) {
+        let series = c
+            .draw_series(LineSeries::new(s, style(VERMILION, 2)))
+            .map_err(err)?;
+        if !labelled {
+            series
+                .label("min distance (no line: no human point tracked)")
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style(VERMILION, 3)));
+            labelled = true;
+        }
+    }
+    if labelled {
+        legend(&mut c, SeriesLabelPosition::UpperRight).map_err(err)?;
+    }
+    root.present().map_err(err)
+}
+
+/// Colour of a task phase bar.
+fn phase_colour(p: &str) -> RGBColor {
+    match p {
+        "Fetch" => SKY,
+        "WaitForAttention" => YELLOW,
+        "Approach" => BLUE,
+        "Present" => ORANGE,
+        "Release" => GREEN,
+        "Retreat" => PURPLE,
+        _ => RGBColor(200, 200, 200),
+    }
+}
+
+/// Open/closed intervals of an on/off event stream.
+fn on_intervals(
+    events: &[(f64, TrialEvent)],
+    end: f64,
+    on: impl Fn(&TrialEvent) -> Option<bool>,
+) -> Vec<(f64, f64)> {
+    let mut out = Vec::new();
+    let mut since = None;
+    for (t, e) in events {
+        match (on(e), since) {
+            (Some(true), None) => since = Some(*t),
+            (Some(false), Some(s)) => {
+                out.push((s, *t));
+                since = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = since {
+        out.push((s, end));
+    }
+    out
+}
+
+/// The handover timeline.
+fn plot_handovers(
+    path: &Path,
+    meta: &TrialMeta,
+    rec: &Recorded,
+    x: &std::ops::Range<f64>,
+) -> anyhow::Result<()> {
+    let root = BitMapBackend::new(path, (PX.0, 420)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let end = x.end;
+    let mut c = ChartBuilder::on(&root)
+        .caption(format!("{}Handover timeline", sim_tag(meta)), font(22))
+        .margin_top(8)
+        .margin_left(14)
+        .margin_right(24)
+        .margin_bottom(6)
+        .x_label_area_size(46)
+        .y_label_area_size(150)
+        .build_cartesian_2d(x.clone(), 0.0..4.0)
+        .map_err(err)?;
+    let rows = [
+        "hesitation (sim.)",
+        "operator idle",
+        "handovers",
+        "robot task phase",
+    ];
+    c.configure_mesh()
+        .x_desc("trial time t [s]")
+        .axis_desc_style(font(18))
+        .label_style(font(15))
+        .x_labels(12)
+        .y_labels(8)
+        .y_label_formatter(&|v: &f64| {
+            let k = (v - 0.5).round();
+            if (v - 0.5 - k).abs() < 1e-6 && (0.0..4.0).contains(&k) {
+                rows.get(k as usize).copied().unwrap_or("").to_string()
+            } else {
+                String::new()
+            }
+        })
+        .light_line_style(TRANSPARENT)
+        .bold_line_style(BLACK.mix(0.06))
+        .draw()
+        .map_err(err)?;
+    // Phases (row 3).
+    let mut phases: Vec<(f64, &str)> = Vec::new();
+    for (t, e) in &rec.events {
+        if let TrialEvent::TaskPhase { phase } = e {
+            phases.push((*t, phase));
+        }
+    }
+    let bars: Vec<(f64, f64, &str)> = phases
+        .iter()
+        .enumerate()
+        .map(|(k, &(t, p))| (t, phases.get(k + 1).map_or(end, |n| n.0), p))
+        .collect();
+    c.draw_series(
+        bars.iter()
+            .map(|&(a, b, p)| Rectangle::new([(a, 3.15), (b, 3.85)], phase_colour(p).filled())),
+    )
+    .map_err(err)?;
+    let mut seen: Vec<&str> = Vec::new();
+    for &(_, _, p) in &bars {
+        if !seen.contains(&p) {
+            seen.push(p);
+        }
+    }
+    for p in seen {
+        let colour = phase_colour(p);
+        c.draw_series(std::iter::empty::<Rectangle<(f64, f64)>>())
+            .map_err(err)?
+            .label(p)
+            .legend(move |(x, y)| Rectangle::new([(x, y - 7), (x + 24, y + 7)], colour.filled()));
+    }
+    // Operator idle (row 1) and hesitation (row 0).
+    let idle = on_intervals(&rec.events, end, |e| match e {
+        TrialEvent::OperatorIdle { idle } => Some(*idle),
+        _ => None,
+    });
+    c.draw_series(
+        idle.iter()
+            .map(|&(a, b)| Rectangle::new([(a, 1.2), (b, 1.8)], GREY.filled())),
+    )
+    .map_err(err)?;
+    let hes = on_intervals(&rec.events, end, |e| match e {
+        TrialEvent::Hesitation { active } => Some(*active),
+        _ => None,
+    });
+    c.draw_series(
+        hes.iter()
+            .map(|&(a, b)| Rectangle::new([(a, 0.2), (b, 0.8)], PURPLE.filled())),
+    )
+    .map_err(err)?;
+    // Handovers (row 2): waiting spans and markers.
+    let mut presented: Vec<(u32, f64)> = Vec::new();
+    for (t, e) in &rec.events {
+        match *e {
+            TrialEvent::OperatorNeedsPart { handover } => {
+                c.draw_series(std::iter::once(TriangleMarker::new(
+                    (*t, 2.2),
+                    9,
+                    VERMILION.filled(),
+                )))
+                .map_err(err)?;
+                let _ = handover;
+            }
+            TrialEvent::Presented { handover } => {
+                presented.push((handover, *t));
+                c.draw_series(std::iter::once(TriangleMarker::new(
+                    (*t, 2.5),
+                    10,
+                    BLUE.filled(),
+                )))
+                .map_err(err)?;
+                c.draw_series(std::iter::once(Text::new(
+                    format!("#{handover}"),
+                    (*t, 2.92),
+                    font(14),
+                )))
+                .map_err(err)?;
+            }
+            TrialEvent::Grasped { handover } | TrialEvent::PartReturned { handover } => {
+                let grasped = matches!(e, TrialEvent::Grasped { .. });
+                if let Some(k) = presented.iter().rposition(|p| p.0 == handover) {
+                    let (_, t0) = presented.remove(k);
+                    c.draw_series(std::iter::once(Rectangle::new(
+                        [(t0, 2.42), (*t, 2.58)],
+                        BLUE.mix(0.35).filled(),
+                    )))
+                    .map_err(err)?;
+                }
+                if grasped {
+                    c.draw_series(std::iter::once(Circle::new((*t, 2.5), 8, GREEN.filled())))
+                        .map_err(err)?;
+                } else {
+                    c.draw_series(std::iter::once(Cross::new(
+                        (*t, 2.5),
+                        8,
+                        style(VERMILION, 3),
+                    )))
+                    .map_err(err)?;
+                }
+            }
+            _ => {}
+        }
+    }
+    // Marker legend entries.
+    c.draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+        .map_err(err)?
+        .label("▲ presented (blue) · ● grasped · ✕ returned · ▲ operator needs part (red, below)")
+        .legend(|(x, y)| Circle::new((x + 12, y), 6, GREEN.filled()));
+    c.configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .label_font(font(13))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.3))
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)
+}
+
+/// Standard base64 (RFC 4648, with padding).
+pub(crate) fn base64(bytes: &[u8]) -> String {
+    const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
+    for chunk in bytes.chunks(3) {
+        let b = [
+            chunk.first().copied().unwrap_or(0),
+            chunk.get(1).copied().unwrap_or(0),
+            chunk.get(2).copied().unwrap_or(0),
+        ];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for k in 0..4 {
+            if k <= chunk.len() {
+                out.push(T[((n >> (18 - 6 * k)) & 63) as usize] as char);
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+fn opt(x: Option<f64>, unit: &str) -> String {
+    x.map_or_else(|| "–".into(), |v| format!("{v:.3}{unit}"))
+}
+
+/// Renders the plots and writes `report.html` into `dir`.
+pub(crate) fn write(
+    dir: &Path,
+    meta: &TrialMeta,
+    options: &LogOptions,
+    rec: &Recorded,
+    summary: &Summary,
+) -> anyhow::Result<ReportFiles> {
+    register_font()?;
+    let t_end = summary
+        .completion_time_s
+        .max(rec.frames.last().map_or(0.0, |f| f.t_s));
+    let x = 0.0..if t_end > 0.0 { t_end } else { 1.0 };
+    let mut plots = Vec::new();
+    let mut figures: Vec<(String, PathBuf)> = Vec::new();
+
+    let p = dir.join(INDICATORS_PNG);
+    plot_indicators(&p, meta, rec, &x)?;
+    figures.push(("Indicators and the dominant indicator".into(), p.clone()));
+    plots.push(p);
+    if !rec.indicators.is_empty() {
+        let samples: Vec<assess_report::Sample> = rec.indicators.iter().map(|i| i.sample).collect();
+        let fig = plot::Figure {
+            samples: &samples,
+            medium_from: options.cwl_medium_from,
+            high_from: options.cwl_high_from,
+            horizon_s: options.window_horizon_s,
+        };
+        let written = plot::render(dir, &fig)?;
+        if let Some(combined) = written.last() {
+            figures.push((
+                "Indicator dynamics (cumulative, as in the paper)".into(),
+                combined.clone(),
+            ));
+        }
+        plots.extend(written);
+    }
+    for (title, name, f) in [
+        (
+            "Adaptations",
+            ADAPTATION_PNG,
+            plot_adaptation
+                as fn(&Path, &TrialMeta, &Recorded, &std::ops::Range<f64>) -> anyhow::Result<()>,
+        ),
+        ("Robot speed and human distance", ROBOT_PNG, plot_robot),
+        ("Handover timeline", HANDOVERS_PNG, plot_handovers),
+    ] {
+        let p = dir.join(name);
+        f(&p, meta, rec, &x)?;
+        figures.push((title.into(), p.clone()));
+        plots.push(p);
+    }
+
+    let html = page(meta, summary, &figures)?;
+    let path = dir.join(HTML_FILE);
+    std::fs::write(&path, html).with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(ReportFiles { html: path, plots })
+}
+
+fn page(meta: &TrialMeta, s: &Summary, figures: &[(String, PathBuf)]) -> anyhow::Result<String> {
+    let mut h = String::new();
+    let title = format!(
+        "{}Trial {} · {} · {} · seed {}",
+        if meta.simulated { "SIMULATED " } else { "" },
+        meta.participant,
+        meta.condition,
+        meta.policy,
+        meta.seed
+    );
+    let _ = write!(
+        h,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\n<style>\
+body{{font-family:sans-serif;max-width:1450px;margin:1em auto;padding:0 1em;color:#222}}\
+.sim{{background:#d55e00;color:#fff;font-size:1.6em;font-weight:bold;padding:.5em 1em;border-radius:6px;letter-spacing:.05em}}\
+table{{border-collapse:collapse;margin:.5em 0}}td,th{{border:1px solid #ccc;padding:.25em .6em;text-align:left}}\
+th{{background:#f3f3f3}}img{{max-width:100%;border:1px solid #eee}}\
+</style></head><body>\n",
+        esc(&title)
+    );
+    if meta.simulated {
+        h.push_str("<div class=\"sim\">SIMULATED TRIAL — simulated operator; no person took part. These data are not human measurements.</div>\n");
+    }
+    let _ = writeln!(h, "<h1>{}</h1>", esc(&title));
+    let _ = writeln!(h, "<table>");
+    for (k, v) in [
+        ("participant", meta.participant.clone()),
+        ("condition", meta.condition.clone()),
+        ("policy", meta.policy.clone()),
+        ("seed", meta.seed.to_string()),
+        ("simulated", meta.simulated.to_string()),
+        ("robot", meta.robot.clone()),
+        ("started (UTC)", meta.started_utc.clone()),
+        ("completion time", format!("{:.3} s", s.completion_time_s)),
+        (
+            "finish reason",
+            s.finish_reason
+                .clone()
+                .unwrap_or_else(|| "– (not finished cleanly)".into()),
+        ),
+        ("robot idle", format!("{:.3} s", s.robot_idle_s)),
+        ("operator idle", format!("{:.3} s", s.operator_idle_s)),
+        (
+            "hesitation share (assessed H=1 / C=1)",
+            opt(s.hesitation_share.assessed, ""),
+        ),
+        (
+            "hesitation share (simulated ground truth)",
+            opt(s.hesitation_share.ground_truth, ""),
+        ),
+        (
+            "HRC-CWL mean cumulative / windowed",
+            format!(
+                "{} / {}",
+                opt(s.hrc_cwl_mean.cumulative, ""),
+                opt(s.hrc_cwl_mean.windowed, "")
+            ),
+        ),
+        (
+            "HRC-CWL max cumulative / windowed",
+            format!(
+                "{} / {}",
+                opt(s.hrc_cwl_max.cumulative, ""),
+                opt(s.hrc_cwl_max.windowed, "")
+            ),
+        ),
+        ("adaptation changes", s.adaptation_changes.total.to_string()),
+        ("safety events", s.safety_events.total.to_string()),
+    ] {
+        let _ = writeln!(h, "<tr><th>{}</th><td>{}</td></tr>", esc(k), esc(&v));
+    }
+    let _ = writeln!(h, "</table>");
+    let _ = writeln!(h, "<h2>Time dominant</h2><table><tr>");
+    for k in s.dominant_time_s.keys() {
+        let _ = write!(h, "<th>{}</th>", esc(k));
+    }
+    h.push_str("</tr><tr>");
+    for v in s.dominant_time_s.values() {
+        let _ = write!(h, "<td>{v:.3} s</td>");
+    }
+    h.push_str("</tr></table>\n");
+    let _ = writeln!(
+        h,
+        "<h2>Handovers</h2><table><tr><th>#</th><th>robot wait [s]</th><th>operator wait [s]</th><th>returned</th></tr>"
+    );
+    for ho in &s.handovers {
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            ho.index,
+            opt(ho.robot_wait_s, ""),
+            opt(ho.operator_wait_s, ""),
+            if ho.returned { "yes" } else { "no" }
+        );
+    }
+    h.push_str("</table>\n");
+    for (title, path) in figures {
+        let bytes =
+            std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let _ = writeln!(
+            h,
+            "<h2>{}{}</h2>\n<img alt=\"{}\" src=\"data:image/png;base64,{}\">\n<p><a href=\"{}\">{}</a></p>",
+            if meta.simulated { "SIMULATED · " } else { "" },
+            esc(title),
+            esc(title),
+            base64(&bytes),
+            esc(&name),
+            esc(&name)
+        );
+    }
+    h.push_str("<p>Files: <a href=\"trial.mcap\">trial.mcap</a> (open in Foxglove), <a href=\"indicators.csv\">indicators.csv</a>, <a href=\"robot.csv\">robot.csv</a>, <a href=\"summary.json\">summary.json</a>.</p>\n</body></html>\n");
+    Ok(h)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_matches_rfc4648_vectors() {
+        for (i, o) in [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ] {
+            assert_eq!(base64(i.as_bytes()), o);
+        }
+    }
+
+    #[test]
+    fn runs_merge_contiguous_equal_labels() {
+        let r = runs(&[(0.0, 1.0, 'a'), (1.0, 2.0, 'a'), (2.0, 3.0, 'b')]);
+        assert_eq!(r, vec![(0.0, 2.0, 'a'), (2.0, 3.0, 'b')]);
+    }
+}
