@@ -78,6 +78,18 @@ fn synthetic(
                 w.events += 1;
             }
         }
+        // The simulated operator idles 0.2–0.5 s and hesitates 0.9–1.1 s of each cycle.
+        for (at, e) in [
+            (100, TrialEvent::OperatorIdle { idle: true }),
+            (250, TrialEvent::OperatorIdle { idle: false }),
+            (450, TrialEvent::Hesitation { active: true }),
+            (550, TrialEvent::Hesitation { active: false }),
+        ] {
+            if k % 1000 == at {
+                log.event(t, &e)?;
+                w.events += 1;
+            }
+        }
         let s = (t * 1.3).sin();
         state.timestamp_s = t + 100.0;
         state.actual_q = [s, -1.2, 1.0, -1.4, -1.57, 0.0];
@@ -155,7 +167,9 @@ fn count_topics(msgs: &[ReadMessage]) -> BTreeMap<String, u64> {
 #[test]
 fn round_trip_through_mcap_with_every_channel_and_decimated_robot_state() {
     let dir = tempfile::tempdir().unwrap();
-    let run = dir.path().join("run");
+    // HRC_ADAPT_KEEP_LOG=<dir> keeps the files, to look at the report.
+    let run = std::env::var_os("HRC_ADAPT_KEEP_LOG")
+        .map_or_else(|| dir.path().join("run"), std::path::PathBuf::from);
     let mut log = TrialLog::create(&run, &meta(), LogOptions::default()).unwrap();
     // 6 s at 500 Hz.
     let w = synthetic(&mut log, 3000, |_| {}).unwrap();

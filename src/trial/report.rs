@@ -268,7 +268,7 @@ fn plot_indicators(
             }),
     )
     .map_err(err)?;
-    let names = ["AED", "TID", "ICD", "ASD̃ (ASD_ctx, normalised)", "OHD"];
+    let names = ["AED", "TID", "ICD", "ASD_norm (normalised ASD_ctx)", "OHD"];
     for (j, name) in names.iter().enumerate() {
         let k = Indicator::ALL.get(j).copied();
         let pts = rec
@@ -317,20 +317,41 @@ fn plot_adaptation(
             &top,
             &format!("{}Adaptation: speed and smoothness scales", sim_tag(meta)),
             x.clone(),
-            0.0..1.1,
+            0.0..1.22,
             "scale [-]",
             8,
         )
         .map_err(err)?;
+        // The active rule as a band along the top, in its indicator's colour.
+        let rules: Vec<(f64, f64, Option<Indicator>)> = a
+            .iter()
+            .enumerate()
+            .map(|(k, r)| {
+                let t1 = a.get(k + 1).map_or(end, |n| n.t_s);
+                let ind = policies::indicator_from_key(r.indicator).flatten();
+                (r.t_s, t1, ind)
+            })
+            .collect();
+        c.draw_series(runs(&rules).into_iter().map(|(t0, t1, k)| {
+            Rectangle::new([(t0, 1.1), (t1, 1.2)], indicator_colour(k).filled())
+        }))
+        .map_err(err)?
+        .label("band: active rule (indicator colour; grey = none)")
+        .legend(|(x, y)| {
+            Rectangle::new(
+                [(x, y - 7), (x + 24, y + 7)],
+                indicator_colour(Some(Indicator::Icd)).filled(),
+            )
+        });
         for (name, colour, w, f) in [
             (
                 "speed scale",
                 BLUE,
-                3,
+                7,
                 (|r| r.speed_scale) as fn(&super::log::AdaptationRecord) -> f64,
             ),
-            ("acceleration scale", ORANGE, 2, |r| r.acceleration_scale),
-            ("jerk scale", GREEN, 2, |r| r.jerk_scale),
+            ("acceleration scale", ORANGE, 4, |r| r.acceleration_scale),
+            ("jerk scale", GREEN, 1, |r| r.jerk_scale),
         ] {
             let pts: Vec<(f64, f64)> = a.iter().map(|r| (r.t_s, f(r))).collect();
             draw_series(&mut c, steps(&pts, end), colour, w, name).map_err(err)?;
@@ -450,7 +471,7 @@ fn phase_colour(p: &str) -> RGBColor {
         "Approach" => BLUE,
         "Present" => ORANGE,
         "Release" => GREEN,
-        "Retreat" => PURPLE,
+        "Retreat" => RGBColor(150, 150, 200),
         _ => RGBColor(200, 200, 200),
     }
 }
@@ -486,10 +507,11 @@ fn plot_handovers(
     rec: &Recorded,
     x: &std::ops::Range<f64>,
 ) -> anyhow::Result<()> {
-    let root = BitMapBackend::new(path, (PX.0, 420)).into_drawing_area();
+    let root = BitMapBackend::new(path, (PX.0, 470)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
+    let (top, strip) = root.split_vertically(410);
     let end = x.end;
-    let mut c = ChartBuilder::on(&root)
+    let mut c = ChartBuilder::on(&top)
         .caption(format!("{}Handover timeline", sim_tag(meta)), font(22))
         .margin_top(8)
         .margin_left(14)
@@ -510,19 +532,24 @@ fn plot_handovers(
         .axis_desc_style(font(18))
         .label_style(font(15))
         .x_labels(12)
-        .y_labels(8)
-        .y_label_formatter(&|v: &f64| {
-            let k = (v - 0.5).round();
-            if (v - 0.5 - k).abs() < 1e-6 && (0.0..4.0).contains(&k) {
-                rows.get(k as usize).copied().unwrap_or("").to_string()
-            } else {
-                String::new()
-            }
-        })
+        .y_labels(0)
         .light_line_style(TRANSPARENT)
         .bold_line_style(BLACK.mix(0.06))
         .draw()
         .map_err(err)?;
+    // Row names, left of the plot, at each row's centre.
+    for (k, name) in rows.iter().enumerate() {
+        let (px, py) = c.backend_coord(&(x.start, k as f64 + 0.5));
+        top.draw(&Text::new(
+            *name,
+            (px - 8, py),
+            font(16).pos(plotters::style::text_anchor::Pos::new(
+                plotters::style::text_anchor::HPos::Right,
+                plotters::style::text_anchor::VPos::Center,
+            )),
+        ))
+        .map_err(err)?;
+    }
     // Phases (row 3).
     let mut phases: Vec<(f64, &str)> = Vec::new();
     for (t, e) in &rec.events {
@@ -545,13 +572,6 @@ fn plot_handovers(
         if !seen.contains(&p) {
             seen.push(p);
         }
-    }
-    for p in seen {
-        let colour = phase_colour(p);
-        c.draw_series(std::iter::empty::<Rectangle<(f64, f64)>>())
-            .map_err(err)?
-            .label(p)
-            .legend(move |(x, y)| Rectangle::new([(x, y - 7), (x + 24, y + 7)], colour.filled()));
     }
     // Operator idle (row 1) and hesitation (row 0).
     let idle = on_intervals(&rec.events, end, |e| match e {
@@ -625,18 +645,77 @@ fn plot_handovers(
             _ => {}
         }
     }
-    // Marker legend entries.
-    c.draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
-        .map_err(err)?
-        .label("▲ presented (blue) · ● grasped · ✕ returned · ▲ operator needs part (red, below)")
-        .legend(|(x, y)| Circle::new((x + 12, y), 6, GREEN.filled()));
-    c.configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
-        .label_font(font(13))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.3))
-        .draw()
+    // The legend, in a strip below the plot: phase colours, bars, markers.
+    let mut xpx = 170;
+    let y = 28;
+    let item_font = font(15);
+    let mut item = |shape: &dyn Fn((i32, i32)) -> Res<()>, label: &str| -> Res<()> {
+        shape((xpx + 10, y))?;
+        strip.draw(&Text::new(
+            label.to_string(),
+            (xpx + 26, y - 8),
+            item_font.clone(),
+        ))?;
+        let w = item_font
+            .font
+            .box_size(label)
+            .map_or(8 * label.len() as i32, |(w, _)| w as i32);
+        xpx += 26 + w + 22;
+        Ok(())
+    };
+    for p in seen {
+        let colour = phase_colour(p);
+        item(
+            &|(cx, cy)| {
+                strip.draw(&Rectangle::new(
+                    [(cx - 10, cy - 8), (cx + 10, cy + 8)],
+                    colour.filled(),
+                ))
+            },
+            p,
+        )
         .map_err(err)?;
+    }
+    item(
+        &|(cx, cy)| strip.draw(&TriangleMarker::new((cx, cy), 9, BLUE.filled())),
+        "presented",
+    )
+    .map_err(err)?;
+    item(
+        &|(cx, cy)| strip.draw(&Circle::new((cx, cy), 8, GREEN.filled())),
+        "grasped",
+    )
+    .map_err(err)?;
+    item(
+        &|(cx, cy)| strip.draw(&Cross::new((cx, cy), 8, style(VERMILION, 3))),
+        "returned",
+    )
+    .map_err(err)?;
+    item(
+        &|(cx, cy)| strip.draw(&TriangleMarker::new((cx, cy), 9, VERMILION.filled())),
+        "operator needs part",
+    )
+    .map_err(err)?;
+    item(
+        &|(cx, cy)| {
+            strip.draw(&Rectangle::new(
+                [(cx - 10, cy - 8), (cx + 10, cy + 8)],
+                GREY.filled(),
+            ))
+        },
+        "idle",
+    )
+    .map_err(err)?;
+    item(
+        &|(cx, cy)| {
+            strip.draw(&Rectangle::new(
+                [(cx - 10, cy - 8), (cx + 10, cy + 8)],
+                PURPLE.filled(),
+            ))
+        },
+        "hesitation",
+    )
+    .map_err(err)?;
     root.present().map_err(err)
 }
 
