@@ -1,12 +1,32 @@
-//! `hrc-adapt trial`: one closed-loop adaptive handover trial (issue 5; being written).
+//! `hrc-adapt trial`: one closed-loop adaptive handover trial (issue 5).
+//!
+//! - [`operator`]: the **simulated operator** (seeded stochastic gearbox-task model);
+//! - [`runtime`]: cues → assessor (30 Hz) → policy → controller (500 Hz) → supervisor → robot
+//!   on a mock clock ([`runtime::run_simulated`] for the experiment runner);
+//! - [`config`]: `config/trial.toml` (files, rates, workspace → robot base transform);
+//! - `sink`: the log interface the runtime writes to, with a minimal deterministic writer
+//!   (indicators.csv, robot.csv, summary.json) until the full `TrialLog` is wired in.
 
+pub(crate) mod config;
+#[allow(dead_code)]
 mod events;
+#[allow(dead_code)]
 mod log;
-mod operator;
+pub(crate) mod operator;
+#[allow(dead_code)]
 mod report;
-mod runtime;
+pub(crate) mod runtime;
+mod sink;
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use clap::Args;
+use policies::PolicyKind;
+
+#[allow(unused_imports)] // for the experiment runner
+pub(crate) use runtime::{TrialSpec, run_simulated};
 
 /// Arguments of `hrc-adapt trial`.
 #[derive(Debug, Args)]
@@ -14,8 +34,108 @@ pub(crate) struct TrialArgs {
     /// Participant id, used in the run folder name.
     #[arg(long, default_value = "P00")]
     participant: String,
+    /// Task complexity level: L1, L2 or L3.
+    #[arg(long, default_value = "L2")]
+    condition: String,
+    /// Policy: adaptive or fixed.
+    #[arg(long, default_value = "adaptive")]
+    policy: String,
+    /// Seed of the simulated operator.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Trial configuration (default: the shipped config/trial.toml).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Robot: `sim` (in-process, mock clock), `emulator` (loopback RTDE) or a UR5e's address.
+    #[arg(long, default_value = "sim")]
+    robot: String,
+    /// Folder under which the run folder is created.
+    #[arg(long, default_value = "runs")]
+    out_root: PathBuf,
 }
 
+/// Runs `hrc-adapt trial`.
 pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
-    anyhow::bail!("`trial` is not implemented yet (issue 5); participant {}", args.participant)
+    let config = match &args.config {
+        Some(p) => config::TrialConfig::from_file(p)?,
+        None => config::TrialConfig::shipped()?,
+    };
+    let spec = TrialSpec {
+        participant: args.participant.clone(),
+        condition: args.condition.parse()?,
+        policy: args.policy.parse::<PolicyKind>()?,
+        seed: args.seed,
+        config,
+    };
+    match args.robot.as_str() {
+        "sim" => {}
+        "emulator" => anyhow::bail!(
+            "--robot emulator is not wired yet (the emulator runs on the wall clock; see the \
+             trial runtime docs); use --robot sim"
+        ),
+        ip => anyhow::bail!("--robot {ip}: real UR5e sessions are not wired yet; use --robot sim"),
+    }
+    // The wall clock is used only for the folder name.
+    let stamp = wall_stamp();
+    let dir = args.out_root.join(format!(
+        "{stamp}-{}-{}-{}",
+        spec.participant,
+        spec.condition.as_str(),
+        spec.policy.as_str()
+    ));
+    let stop = Arc::new(AtomicBool::new(false));
+    install_ctrl_c(stop.clone());
+    let bar = runtime::progress_bar(true);
+    let started = std::time::Instant::now();
+    let out =
+        runtime::run_simulated_with(&spec, &dir, &stop, &mut |l| runtime::update_bar(&bar, l))?;
+    bar.finish_and_clear();
+    if stop.load(Ordering::Relaxed) {
+        eprintln!("interrupted: robot stopped, logs closed");
+    }
+    eprintln!(
+        "[simulation] trial finished in {:.1} s wall time",
+        started.elapsed().as_secs_f64()
+    );
+    println!("{}", out.display());
+    Ok(())
+}
+
+/// Sets `stop` on Ctrl-C (a small thread with a current-thread tokio runtime).
+fn install_ctrl_c(stop: Arc<AtomicBool>) {
+    std::thread::spawn(move || {
+        let Ok(rt) = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+        else {
+            return;
+        };
+        if rt.block_on(tokio::signal::ctrl_c()).is_ok() {
+            stop.store(true, Ordering::Relaxed);
+        }
+    });
+}
+
+/// `YYYYmmdd-HHMMSS` (UTC) of the wall clock, for folder names only.
+fn wall_stamp() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let (days, rem) = (secs / 86_400, secs % 86_400);
+    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
+    let z = days as i64 + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
+    )
 }

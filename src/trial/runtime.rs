@@ -1,1 +1,450 @@
-//! (issue 5: being written)
+//! The trial runtime on a **mock clock**: simulated operator (cues, 30 Hz) → `Assessor` →
+//! policy → `Controller` (500 Hz) → `Supervisor` → `SimRobot`.
+//!
+//! Time is the control cycle count × 2 ms; nothing in this path reads the wall clock, so a
+//! trial is deterministic for its seed and config and runs as fast as the CPU allows. The
+//! 500 Hz part (controller, supervisor, robot) allocates nothing per cycle; the 30 Hz part
+//! (operator, assessor, policy) and the logs run between control cycles on the same thread.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use adapt::controller::{
+    Controller, ControllerConfig, HumanPoints, MotionAdaptation, RawHandoverFile, SmoothnessScale,
+    SpeedScale,
+};
+use adapt::task::{Phase, TaskEventKind};
+use anyhow::Context as _;
+use assess::{AreaRole, AssessConfig, Assessor, CueFrame, RobotContext, Workspace};
+use policies::{Adaptation, PolicyKind, RuleTable, TaskContext, TaskPhase};
+use robot_io::sim::{SimConfig, SimRobot};
+use robot_io::{JointCommand, Robot, RobotState};
+use safety::{Supervisor, SupervisorConfig, Verdict, WorldView};
+
+use super::config::TrialConfig;
+use super::events::TrialEvent;
+use super::operator::{Level, RobotView, SimulatedOperator};
+use super::sink::{MinimalLog, TrialMeta, TrialSink};
+
+/// Control period [s] (UR5e).
+const CYCLE_S: f64 = 0.002;
+
+/// Everything that defines one simulated trial.
+#[derive(Debug, Clone)]
+pub(crate) struct TrialSpec {
+    /// Participant id (folder name and summary).
+    pub(crate) participant: String,
+    /// Task complexity level.
+    pub(crate) condition: Level,
+    /// Policy.
+    pub(crate) policy: PolicyKind,
+    /// Seed of the simulated operator.
+    pub(crate) seed: u64,
+    /// The trial configuration.
+    pub(crate) config: TrialConfig,
+}
+
+/// A `SimRobot` advanced one 2 ms cycle by each `read_state` (the mock clock): read → decide →
+/// send → (next read advances the model).
+#[derive(Debug)]
+struct LockstepSim {
+    sim: SimRobot,
+    first: bool,
+}
+
+impl Robot for LockstepSim {
+    fn read_state(&mut self, out: &mut RobotState) -> robot_io::Result<()> {
+        if !self.first {
+            self.sim.step();
+        }
+        self.first = false;
+        self.sim.read_state(out)
+    }
+
+    fn send(&mut self, cmd: &JointCommand) -> robot_io::Result<()> {
+        self.sim.send(cmd)
+    }
+}
+
+fn task_phase(p: Phase) -> TaskPhase {
+    match p {
+        Phase::Idle => TaskPhase::Idle,
+        Phase::Fetch => TaskPhase::Fetch,
+        Phase::WaitForAttention => TaskPhase::WaitForAttention,
+        Phase::Approach => TaskPhase::Approach,
+        Phase::Present => TaskPhase::Present,
+        Phase::Release => TaskPhase::Release,
+        Phase::Retreat => TaskPhase::Retreat,
+        Phase::Done => TaskPhase::Done,
+    }
+}
+
+/// Maps a policy's [`Adaptation`] onto adapt's inputs (the policies crate docs' mapping):
+/// speed scale → speed scale; smoothness = min(acceleration scale, √jerk scale) (adapt scales
+/// acceleration × s and jerk × s²); start delay; minimum approach duration; `gates_start()` →
+/// wait-for-attention with `gate.clear` as "attention on the robot".
+fn motion_adaptation(a: &Adaptation) -> MotionAdaptation {
+    let smooth = a.acceleration_scale.get().min(a.jerk_scale.get().sqrt());
+    MotionAdaptation {
+        speed_scale: SpeedScale::new(a.speed_scale.get()).unwrap_or(SpeedScale::ONE),
+        smoothness_scale: SmoothnessScale::new(smooth).unwrap_or(SmoothnessScale::ONE),
+        start_delay: Duration::from_secs_f64(a.timing.start_delay_s.max(0.0)),
+        min_approach_duration: Duration::from_secs_f64(a.timing.min_approach_duration_s.max(0.0)),
+        wait_for_attention: a.timing.gates_start(),
+        attention_on_robot: a.gate.clear,
+    }
+}
+
+fn verdict_kind(v: &Verdict) -> &'static str {
+    match v {
+        Verdict::Passed => "passed",
+        Verdict::Reduced { .. } => "reduced",
+        Verdict::Stopped { .. } => "stopped",
+        Verdict::Halted { .. } => "halted",
+    }
+}
+
+/// Live values for the progress display.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Live {
+    /// Trial time [s].
+    pub(crate) t_s: f64,
+    /// Windowed HRC-CWL [-].
+    pub(crate) hrc_cwl: f64,
+    /// Dominant indicator key.
+    pub(crate) dominant: &'static str,
+    /// Handovers completed.
+    pub(crate) handovers_done: u32,
+    /// Handovers planned.
+    pub(crate) handovers: u32,
+}
+
+/// Run one simulated trial into `out_dir` (created), calling `progress` at the cue rate. Stops
+/// early when `stop` becomes true (the robot is stopped through the supervisor, the logs are
+/// closed). Returns the folder.
+pub(crate) fn run_simulated_with(
+    spec: &TrialSpec,
+    out_dir: &Path,
+    stop: &AtomicBool,
+    progress: &mut dyn FnMut(&Live),
+) -> anyhow::Result<PathBuf> {
+    let cfg = &spec.config;
+    let workspace = Workspace::from_toml_file(&cfg.workspace)
+        .with_context(|| format!("workspace {}", cfg.workspace.display()))?;
+    let assess_cfg = match &cfg.assess {
+        Some(p) => AssessConfig::from_toml_file(p).with_context(|| format!("{}", p.display()))?,
+        None => AssessConfig::default(),
+    };
+    let raw: RawHandoverFile = toml::from_str(
+        &std::fs::read_to_string(&cfg.controller)
+            .with_context(|| format!("reading {}", cfg.controller.display()))?,
+    )
+    .with_context(|| format!("parsing {}", cfg.controller.display()))?;
+    let ctl_cfg = ControllerConfig::try_from(&raw.controller)?;
+    let table = RuleTable::from_toml_file(&cfg.policy_table)?;
+    let mut policy = spec.policy.build(&table);
+    let mut assessor = Assessor::new(workspace.clone(), assess_cfg)?;
+    let mut operator = SimulatedOperator::new(spec.condition, &workspace, spec.seed)?;
+    let sim = SimRobot::new(SimConfig {
+        initial_q_rad: ctl_cfg.task.home_q_rad,
+        ..SimConfig::ur5e()
+    })?;
+    let mut supervisor =
+        Supervisor::new(LockstepSim { sim, first: true }, SupervisorConfig::ur5e())?;
+    let mut controller = Controller::new(ctl_cfg)?;
+    let meta = TrialMeta {
+        participant: spec.participant.clone(),
+        condition: spec.condition.as_str().to_owned(),
+        policy: spec.policy.as_str().to_owned(),
+        seed: spec.seed,
+        cue_source: "simulated_operator".to_owned(),
+        robot: "sim".to_owned(),
+    };
+    let mut log: Box<dyn TrialSink> =
+        Box::new(MinimalLog::create(out_dir, meta, cfg.robot_log_rate_hz)?);
+
+    let role_of = |id| assessor_role(&workspace, id);
+    let n_handovers = operator.params().handovers() as u32;
+    // Nominal need time of part k: the operator's nominal work before it, with the expected
+    // excursion overhead; the robot starts fetching `lead_time_s` earlier.
+    let overhead = operator.params().overhead_factor();
+    let planned_start: Vec<f64> = (0..n_handovers as usize)
+        .map(|k| {
+            let work: f64 = operator.params().work_s[..=k].iter().sum();
+            (work * overhead - cfg.lead_time_s).max(0.0)
+        })
+        .collect();
+
+    let cue_rate = cfg.cue_rate_hz;
+    let max_cycles = (cfg.max_duration_s / CYCLE_S).ceil() as u64;
+    let mut state = RobotState::default();
+    let mut cmd = JointCommand::Stop { decel: 3.0 };
+    let mut frame = CueFrame::empty(0.0);
+    let mut motion = MotionAdaptation::default();
+    let mut humans = HumanPoints::default();
+    let mut world = WorldView::clear(0.0);
+    let mut next_cue: u64 = 0;
+    let mut last_cue_t = 0.0;
+    let mut started: u32 = 0; // handovers armed
+    let mut done: u32 = 0; // handovers completed
+    let mut last_indicator: Option<Option<assess::Indicator>> = None;
+    let mut last_verdict = "passed";
+    let mut assembly_since: Option<f64> = None;
+    let mut prev_tcp_v = [0.0f64; 3];
+    let mut peak_acc = 0.0f64;
+    let mut live = Live {
+        handovers: n_handovers,
+        dominant: "none",
+        ..Live::default()
+    };
+    let mut reason = "max_duration";
+
+    let mut k: u64 = 0;
+    while k < max_cycles {
+        let t = k as f64 * CYCLE_S;
+        if stop.load(Ordering::Relaxed) {
+            reason = "interrupted";
+            break;
+        }
+        supervisor.read_state(&mut state)?;
+        let v = &state.actual_tcp_speed;
+        let acc = ((v[0] - prev_tcp_v[0]).powi(2)
+            + (v[1] - prev_tcp_v[1]).powi(2)
+            + (v[2] - prev_tcp_v[2]).powi(2))
+        .sqrt()
+            / CYCLE_S;
+        if k > 0 {
+            peak_acc = peak_acc.max(acc);
+        }
+        prev_tcp_v = [v[0], v[1], v[2]];
+
+        // --- 30 Hz: operator → assessor → policy ---
+        // Frame n is due at cycle ceil(n / rate / 2 ms): integer test k·2ms·rate ≥ n.
+        if (k as f64) * CYCLE_S * cue_rate + 1e-9 >= next_cue as f64 {
+            let tc = next_cue as f64 / cue_rate;
+            next_cue += 1;
+            let p = &state.actual_tcp_pose;
+            let view = RobotView {
+                phase: controller.phase(),
+                tcp_m: cfg.frame.to_workspace([p[0], p[1], p[2]]),
+                tcp_speed_m_s: (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(),
+                tcp_peak_acc_m_s2: peak_acc,
+            };
+            peak_acc = 0.0;
+            operator.step(tc, &view, &mut frame);
+            for e in operator.events() {
+                log.event(tc, e);
+            }
+            frame.robot = RobotContext {
+                collaborating: controller.collaborating(),
+                incomplete: controller.incomplete(),
+            };
+            log.cues(&frame);
+            let a = assessor.update(&frame);
+            log.assessment(a, &workspace);
+            let confirmed_role = a.confirmed.and_then(&role_of);
+            if confirmed_role == Some(AreaRole::Assembly) {
+                assembly_since.get_or_insert(tc);
+            } else {
+                assembly_since = None;
+            }
+            let ctx = TaskContext {
+                now_s: tc,
+                phase: task_phase(controller.phase()),
+                in_collaboration_area: confirmed_role == Some(AreaRole::Collaboration),
+                in_instruction_area: confirmed_role == Some(AreaRole::Instruction),
+                assembly_dwell_s: assembly_since.map_or(0.0, |s| tc - s),
+            };
+            let adaptation = policy.decide(a, &ctx);
+            log.adaptation(tc, &adaptation);
+            if last_indicator != Some(adaptation.reason.indicator) {
+                if last_indicator.is_some() {
+                    log.event(
+                        tc,
+                        &TrialEvent::AdaptationChanged {
+                            indicator: policies::indicator_key(adaptation.reason.indicator),
+                        },
+                    );
+                }
+                last_indicator = Some(adaptation.reason.indicator);
+            }
+            motion = motion_adaptation(&adaptation);
+            // Human points in the base frame (head, left hand, right hand).
+            let to_base = |p: &assess::Vec3| cfg.frame.to_base([p.x, p.y, p.z]);
+            humans.head_m = frame.head.as_ref().map(|h| to_base(&h.position));
+            humans.left_hand_m = frame.hands[0].as_ref().map(|h| to_base(&h.position));
+            humans.right_hand_m = frame.hands[1].as_ref().map(|h| to_base(&h.position));
+            last_cue_t = tc;
+            live.t_s = tc;
+            live.hrc_cwl = a.windowed.hrc_cwl;
+            live.dominant = policies::indicator_key(a.dominant.indicator);
+            live.handovers_done = done;
+            progress(&live);
+            if operator.finished() {
+                reason = "completed";
+                break;
+            }
+        }
+
+        // --- handover scheduling ---
+        let phase = controller.phase();
+        if (phase == Phase::Idle || phase == Phase::Done)
+            && started == done
+            && started < n_handovers
+            && t >= planned_start[started as usize]
+        {
+            if phase == Phase::Done {
+                controller.reset_task();
+            }
+            controller.start_handover();
+            started += 1;
+        } else if phase == Phase::Done && controller.task().part_returned() {
+            // The part came back (present timeout): try the same handover again.
+            controller.reset_task();
+            controller.start_handover();
+        }
+
+        // --- 500 Hz: controller → supervisor → robot ---
+        controller.step(t, &state, &motion, &humans, &mut cmd);
+        for ev in controller.events() {
+            match ev.kind {
+                TaskEventKind::PhaseChanged { to, .. } => {
+                    log.event(t, &TrialEvent::TaskPhase { phase: to.as_str() });
+                    if to == Phase::Present {
+                        log.event(t, &TrialEvent::Presented { handover: started });
+                    }
+                }
+                TaskEventKind::PresentTimeout => {
+                    log.event(t, &TrialEvent::PartReturned { handover: started })
+                }
+                TaskEventKind::ReleaseConfirmed => {
+                    operator.release_confirmed();
+                    for e in operator.events() {
+                        log.event(t, e);
+                    }
+                    done += 1;
+                }
+                TaskEventKind::PartGripped | TaskEventKind::GraspDetected { .. } => {}
+            }
+        }
+        world.now_s = t;
+        world.human_points = [humans.head_m, humans.left_hand_m, humans.right_hand_m];
+        world.perception_age_s = (t - last_cue_t).max(0.0);
+        world.collaborating = controller.collaborating();
+        let verdict = supervisor.step(&cmd, &world);
+        let kind = verdict_kind(&verdict);
+        if kind != last_verdict {
+            if kind != "passed" {
+                log.event(
+                    t,
+                    &TrialEvent::Safety {
+                        reaction: kind,
+                        requirement: verdict.requirement().map_or("none", |r| r.id()),
+                    },
+                );
+            }
+            last_verdict = kind;
+        }
+        log.robot_state(t, &state);
+        log.command(t, &cmd, &verdict);
+        k += 1;
+    }
+
+    // Stop the robot through the supervisor (a few cycles of stop commands), then close.
+    let t_end = k as f64 * CYCLE_S;
+    let stop_cmd = JointCommand::Stop { decel: 3.0 };
+    for j in 0..250u64 {
+        supervisor.read_state(&mut state)?;
+        let t = t_end + j as f64 * CYCLE_S;
+        world.now_s = t;
+        supervisor.step(&stop_cmd, &world);
+        if state.actual_qd.iter().all(|q| q.abs() < 1e-6) {
+            break;
+        }
+    }
+    log.event(t_end, &TrialEvent::Finished { reason });
+    log.finish()
+}
+
+fn assessor_role(ws: &Workspace, id: assess::AreaId) -> Option<AreaRole> {
+    ws.role(id)
+}
+
+/// Run one simulated trial (simulated operator, in-process `SimRobot`, mock clock) into
+/// `out_dir` and return it. Thread-safe: each call owns all its state.
+pub(crate) fn run_simulated(
+    spec: &TrialSpec,
+    out_dir: &Path,
+    show_progress: bool,
+) -> anyhow::Result<PathBuf> {
+    let stop = AtomicBool::new(false);
+    let bar = progress_bar(show_progress);
+    let dir = run_simulated_with(spec, out_dir, &stop, &mut |l| update_bar(&bar, l))?;
+    bar.finish_and_clear();
+    Ok(dir)
+}
+
+/// A progress spinner on stderr (hidden when `show` is false or stderr is not a terminal).
+pub(crate) fn progress_bar(show: bool) -> indicatif::ProgressBar {
+    if show {
+        let bar = indicatif::ProgressBar::new_spinner();
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("{spinner} {msg}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+        );
+        bar
+    } else {
+        indicatif::ProgressBar::hidden()
+    }
+}
+
+/// Shows the live values (every 30th call: once per simulated second at 30 Hz).
+pub(crate) fn update_bar(bar: &indicatif::ProgressBar, l: &Live) {
+    if bar.is_hidden() || (l.t_s * 30.0).round() as u64 % 30 != 0 {
+        return;
+    }
+    bar.set_message(format!(
+        "[simulation] t = {:6.1} s  handovers {}/{}  HRC-CWL {:.3}  dominant {}",
+        l.t_s, l.handovers_done, l.handovers, l.hrc_cwl, l.dominant
+    ));
+    bar.tick();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec(seed: u64, max_s: f64) -> TrialSpec {
+        let mut config = TrialConfig::shipped().unwrap();
+        config.max_duration_s = max_s;
+        TrialSpec {
+            participant: "P01".into(),
+            condition: Level::L2,
+            policy: PolicyKind::Adaptive,
+            seed,
+            config,
+        }
+    }
+
+    #[test]
+    fn same_seed_and_config_give_byte_identical_indicators_and_summary() {
+        let a = tempfile::tempdir().unwrap();
+        let b = tempfile::tempdir().unwrap();
+        let s = spec(42, 45.0);
+        let da = run_simulated(&s, a.path(), false).unwrap();
+        let db = run_simulated(&s, b.path(), false).unwrap();
+        for f in ["indicators.csv", "summary.json"] {
+            let x = std::fs::read(da.join(f)).unwrap();
+            let y = std::fs::read(db.join(f)).unwrap();
+            assert!(x.len() > 100, "{f} is too short");
+            assert!(x == y, "{f} differs between two runs of the same seed");
+        }
+        let other = tempfile::tempdir().unwrap();
+        let dc = run_simulated(&spec(43, 45.0), other.path(), false).unwrap();
+        assert_ne!(
+            std::fs::read(da.join("indicators.csv")).unwrap(),
+            std::fs::read(dc.join("indicators.csv")).unwrap()
+        );
+    }
+}

@@ -1,0 +1,134 @@
+//! `config/trial.toml`: what a trial loads and the workspace → robot base transform.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use serde::Deserialize;
+
+/// The trial configuration file (every key is documented in `config/trial.toml`).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct TrialConfig {
+    /// Workspace calibration file (relative to the config file once loaded: absolute here).
+    pub(crate) workspace: PathBuf,
+    /// Controller file (`adapt::controller::RawHandoverFile`).
+    pub(crate) controller: PathBuf,
+    /// Adaptive policy rule table.
+    pub(crate) policy_table: PathBuf,
+    /// Assessment model constants; `None` for the defaults.
+    #[serde(default)]
+    pub(crate) assess: Option<PathBuf>,
+    /// Cue and assessment rate [Hz].
+    pub(crate) cue_rate_hz: f64,
+    /// Longest simulated trial [s].
+    pub(crate) max_duration_s: f64,
+    /// The robot starts fetching part k this long before the operator's nominal need [s].
+    pub(crate) lead_time_s: f64,
+    /// Robot-state log rate [Hz].
+    pub(crate) robot_log_rate_hz: f64,
+    /// Workspace → base transform.
+    pub(crate) frame: FrameConfig,
+}
+
+/// The robot base pose in the workspace frame.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct FrameConfig {
+    /// Base origin in the workspace frame [m].
+    pub(crate) robot_base_origin_m: [f64; 3],
+    /// Yaw of the base axes about z, relative to the workspace axes [deg].
+    pub(crate) robot_base_yaw_deg: f64,
+}
+
+impl FrameConfig {
+    /// A workspace-frame point [m] in the base frame [m].
+    pub(crate) fn to_base(&self, p: [f64; 3]) -> [f64; 3] {
+        let o = self.robot_base_origin_m;
+        let (s, c) = self.robot_base_yaw_deg.to_radians().sin_cos();
+        let (dx, dy, dz) = (p[0] - o[0], p[1] - o[1], p[2] - o[2]);
+        [c * dx + s * dy, -s * dx + c * dy, dz]
+    }
+
+    /// A base-frame point [m] in the workspace frame [m].
+    pub(crate) fn to_workspace(&self, p: [f64; 3]) -> [f64; 3] {
+        let o = self.robot_base_origin_m;
+        let (s, c) = self.robot_base_yaw_deg.to_radians().sin_cos();
+        [
+            o[0] + c * p[0] - s * p[1],
+            o[1] + s * p[0] + c * p[1],
+            o[2] + p[2],
+        ]
+    }
+}
+
+/// The shipped `config/trial.toml`, embedded (its relative paths resolve against `config/`).
+pub(crate) const SHIPPED_TOML: &str = include_str!("../../config/trial.toml");
+
+impl TrialConfig {
+    /// Parses `text`; relative paths are resolved against `base_dir`.
+    pub(crate) fn from_toml_str(text: &str, base_dir: &Path) -> anyhow::Result<TrialConfig> {
+        let mut cfg: TrialConfig = toml::from_str(text).context("parsing the trial config")?;
+        for p in [
+            &mut cfg.workspace,
+            &mut cfg.controller,
+            &mut cfg.policy_table,
+        ] {
+            *p = base_dir.join(&*p);
+        }
+        if let Some(a) = cfg.assess.as_mut() {
+            *a = base_dir.join(&*a);
+        }
+        anyhow::ensure!(
+            cfg.cue_rate_hz > 0.0 && cfg.cue_rate_hz <= 120.0,
+            "cue_rate_hz must be in (0, 120]"
+        );
+        anyhow::ensure!(cfg.max_duration_s > 0.0, "max_duration_s must be > 0");
+        anyhow::ensure!(cfg.lead_time_s >= 0.0, "lead_time_s must be >= 0");
+        anyhow::ensure!(
+            cfg.robot_log_rate_hz > 0.0 && cfg.robot_log_rate_hz <= 500.0,
+            "robot_log_rate_hz must be in (0, 500]"
+        );
+        anyhow::ensure!(
+            cfg.frame.robot_base_origin_m.iter().all(|v| v.is_finite())
+                && cfg.frame.robot_base_yaw_deg.is_finite(),
+            "frame values must be finite"
+        );
+        Ok(cfg)
+    }
+
+    /// Reads a config file.
+    pub(crate) fn from_file(path: &Path) -> anyhow::Result<TrialConfig> {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        Self::from_toml_str(&text, dir).with_context(|| format!("in {}", path.display()))
+    }
+
+    /// The shipped config, with paths under this repository's `config/`.
+    pub(crate) fn shipped() -> anyhow::Result<TrialConfig> {
+        Self::from_toml_str(
+            SHIPPED_TOML,
+            &Path::new(env!("CARGO_MANIFEST_DIR")).join("config"),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_config_parses_and_maps_the_handover_pose_into_the_collaboration_area() {
+        let cfg = TrialConfig::shipped().unwrap();
+        let p = cfg.frame.to_workspace([-0.73, -0.13, 0.24]);
+        assert!((p[0] - 0.90).abs() < 1e-9 && (p[1] - 0.60).abs() < 1e-9);
+        let back = cfg.frame.to_base(p);
+        assert!((back[0] + 0.73).abs() < 1e-12 && (back[2] - 0.24).abs() < 1e-12);
+        let rotated = FrameConfig {
+            robot_base_origin_m: [1.0, 2.0, 0.5],
+            robot_base_yaw_deg: 37.0,
+        };
+        let q = rotated.to_base(rotated.to_workspace([0.3, -0.2, 0.1]));
+        assert!((q[0] - 0.3).abs() < 1e-12 && (q[1] + 0.2).abs() < 1e-12);
+    }
+}
