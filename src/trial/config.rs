@@ -42,7 +42,7 @@ pub(crate) struct FrameConfig {
 
 impl FrameConfig {
     /// A workspace-frame point [m] in the base frame [m].
-    pub(crate) fn to_base(&self, p: [f64; 3]) -> [f64; 3] {
+    pub(crate) fn to_base(self, p: [f64; 3]) -> [f64; 3] {
         let o = self.robot_base_origin_m;
         let (s, c) = self.robot_base_yaw_deg.to_radians().sin_cos();
         let (dx, dy, dz) = (p[0] - o[0], p[1] - o[1], p[2] - o[2]);
@@ -50,7 +50,7 @@ impl FrameConfig {
     }
 
     /// A base-frame point [m] in the workspace frame [m].
-    pub(crate) fn to_workspace(&self, p: [f64; 3]) -> [f64; 3] {
+    pub(crate) fn to_workspace(self, p: [f64; 3]) -> [f64; 3] {
         let o = self.robot_base_origin_m;
         let (s, c) = self.robot_base_yaw_deg.to_radians().sin_cos();
         [

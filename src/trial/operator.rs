@@ -335,7 +335,7 @@ impl SimulatedOperator {
             })?;
             centres[i] = workspace.area(id).representative_centre;
         }
-        let mut rng = Rng(SplitMix64::new(seed ^ 0x5EED_0F_0BE2_A7u64));
+        let mut rng = Rng(SplitMix64::new(seed ^ 0x5EED_0F0B_E2A7_u64));
         let work = rng.lognormal(params.work_s[0], params.work_sigma);
         let assembly_point = centres[0];
         Ok(SimulatedOperator {

@@ -373,6 +373,7 @@ fn assessor_role(ws: &Workspace, id: assess::AreaId) -> Option<AreaRole> {
 
 /// Run one simulated trial (simulated operator, in-process `SimRobot`, mock clock) into
 /// `out_dir` and return it. Thread-safe: each call owns all its state.
+#[allow(dead_code)] // called by the experiment runner
 pub(crate) fn run_simulated(
     spec: &TrialSpec,
     out_dir: &Path,
