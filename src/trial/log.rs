@@ -43,7 +43,6 @@ pub(crate) mod summary;
 #[path = "log_tests.rs"]
 mod tests;
 
-use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
@@ -346,11 +345,6 @@ impl TrialLog {
         Ok(log)
     }
 
-    /// The run folder.
-    pub(crate) fn dir(&self) -> &Path {
-        &self.dir
-    }
-
     /// Writes one message on channel `c` at trial time `t_s` [s].
     fn write(&mut self, c: usize, t_s: f64, data: &[u8]) -> anyhow::Result<()> {
         let (Some(&channel_id), Some(seq)) = (self.channels.get(c), self.sequences.get_mut(c))
@@ -595,10 +589,13 @@ impl TrialLog {
     }
 }
 
+/// (Tests; external readers use the `mcap` crate the same way.)
+#[cfg(test)]
 /// Reads every message of an MCAP file that a reader can reach: the whole file if it is
 /// complete, else everything up to the last complete chunk (a damaged tail is ignored).
 /// Returns (topic, log time [ns], JSON text) per message, and whether the tail was damaged.
 pub(crate) fn read_mcap_messages(bytes: &[u8]) -> anyhow::Result<(Vec<ReadMessage>, bool)> {
+    use std::borrow::Cow;
     let stream =
         mcap::MessageStream::new_with_options(bytes, mcap::read::Options::IgnoreEndMagic.into())?;
     let mut out = Vec::new();
@@ -627,6 +624,7 @@ pub(crate) fn read_mcap_messages(bytes: &[u8]) -> anyhow::Result<(Vec<ReadMessag
 }
 
 /// One message read back by [`read_mcap_messages`].
+#[cfg(test)]
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct ReadMessage {
     /// The channel's topic.

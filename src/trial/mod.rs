@@ -4,19 +4,15 @@
 //! - [`runtime`]: cues → assessor (30 Hz) → policy → controller (500 Hz) → supervisor → robot
 //!   on a mock clock ([`runtime::run_simulated`] for the experiment runner);
 //! - [`config`]: `config/trial.toml` (files, rates, workspace → robot base transform);
-//! - `sink`: the log interface the runtime writes to, with a minimal deterministic writer
-//!   (indicators.csv, robot.csv, summary.json) until the full `TrialLog` is wired in.
+//! - [`log`]: the trial log (`trial.mcap`, `indicators.csv`, `robot.csv`, `summary.json`,
+//!   `report.html`), fed directly by the runtime.
 
 pub(crate) mod config;
-#[allow(dead_code)]
 mod events;
-#[allow(dead_code)]
 mod log;
 pub(crate) mod operator;
-#[allow(dead_code)]
 mod report;
 pub(crate) mod runtime;
-mod sink;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -118,6 +114,18 @@ fn install_ctrl_c(stop: Arc<AtomicBool>) {
 
 /// `YYYYmmdd-HHMMSS` (UTC) of the wall clock, for folder names only.
 fn wall_stamp() -> String {
+    let (y, m, d, hh, mm, ss) = utc_now();
+    format!("{y:04}{m:02}{d:02}-{hh:02}{mm:02}{ss:02}")
+}
+
+/// `YYYY-mm-ddTHH:MM:SSZ` of the wall clock (the log's `started_utc`).
+pub(crate) fn utc_now_iso() -> String {
+    let (y, m, d, hh, mm, ss) = utc_now();
+    format!("{y:04}-{m:02}-{d:02}T{hh:02}:{mm:02}:{ss:02}Z")
+}
+
+/// The wall clock's civil UTC date and time.
+fn utc_now() -> (i64, i64, i64, u64, u64, u64) {
     let secs = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());
@@ -132,10 +140,5 @@ fn wall_stamp() -> String {
     let d = doy - (153 * mp + 2) / 5 + 1;
     let m = if mp < 10 { mp + 3 } else { mp - 9 };
     let y = yoe + era * 400 + i64::from(m <= 2);
-    format!(
-        "{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
-        rem / 3600,
-        rem % 3600 / 60,
-        rem % 60
-    )
+    (y, m, d, rem / 3600, rem % 3600 / 60, rem % 60)
 }

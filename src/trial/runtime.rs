@@ -24,8 +24,8 @@ use safety::{Supervisor, SupervisorConfig, Verdict, WorldView};
 
 use super::config::TrialConfig;
 use super::events::TrialEvent;
+use super::log::{LogOptions, TrialLog, TrialMeta};
 use super::operator::{Level, RobotView, SimulatedOperator};
-use super::sink::{MinimalLog, TrialMeta, TrialSink};
 
 /// Control period [s] (UR5e).
 const CYCLE_S: f64 = 0.002;
@@ -77,6 +77,21 @@ fn task_phase(p: Phase) -> TaskPhase {
         Phase::Release => TaskPhase::Release,
         Phase::Retreat => TaskPhase::Retreat,
         Phase::Done => TaskPhase::Done,
+    }
+}
+
+/// The phase's name as [`TrialEvent::TaskPhase`] carries it (the variant name, which the
+/// summary's robot-idle phases and the report's timeline colours match).
+fn phase_name(p: Phase) -> &'static str {
+    match p {
+        Phase::Idle => "Idle",
+        Phase::Fetch => "Fetch",
+        Phase::WaitForAttention => "WaitForAttention",
+        Phase::Approach => "Approach",
+        Phase::Present => "Present",
+        Phase::Release => "Release",
+        Phase::Retreat => "Retreat",
+        Phase::Done => "Done",
     }
 }
 
@@ -144,7 +159,7 @@ pub(crate) fn run_simulated_with(
     let ctl_cfg = ControllerConfig::try_from(&raw.controller)?;
     let table = RuleTable::from_toml_file(&cfg.policy_table)?;
     let mut policy = spec.policy.build(&table);
-    let mut assessor = Assessor::new(workspace.clone(), assess_cfg)?;
+    let mut assessor = Assessor::new(workspace.clone(), assess_cfg.clone())?;
     let mut operator = SimulatedOperator::new(spec.condition, &workspace, spec.seed)?;
     let sim = SimRobot::new(SimConfig {
         initial_q_rad: ctl_cfg.task.home_q_rad,
@@ -158,11 +173,22 @@ pub(crate) fn run_simulated_with(
         condition: spec.condition.as_str().to_owned(),
         policy: spec.policy.as_str().to_owned(),
         seed: spec.seed,
-        cue_source: "simulated_operator".to_owned(),
+        simulated: true,
+        // Wall clock: only in trial.mcap's /trial/meta and the report, never in summary.json.
+        started_utc: super::utc_now_iso(),
         robot: "sim".to_owned(),
     };
-    let mut log: Box<dyn TrialSink> =
-        Box::new(MinimalLog::create(out_dir, meta, cfg.robot_log_rate_hz)?);
+    let mut log = TrialLog::create(
+        out_dir,
+        &meta,
+        LogOptions {
+            robot_full_rate: cfg.robot_full_rate,
+            cwl_medium_from: assess_cfg.composite.medium_from,
+            cwl_high_from: assess_cfg.composite.high_from,
+            window_horizon_s: assess_cfg.window.horizon_s,
+            ..LogOptions::default()
+        },
+    )?;
 
     let role_of = |id| assessor_role(&workspace, id);
     let n_handovers = operator.params().handovers() as u32;
@@ -234,15 +260,15 @@ pub(crate) fn run_simulated_with(
             peak_acc = 0.0;
             operator.step(tc, &view, &mut frame);
             for e in operator.events() {
-                log.event(tc, e);
+                log.event(tc, e)?;
             }
             frame.robot = RobotContext {
                 collaborating: controller.collaborating(),
                 incomplete: controller.incomplete(),
             };
-            log.cues(&frame);
+            log.cues(tc, &frame)?;
             let a = assessor.update(&frame);
-            log.assessment(a, &workspace);
+            log.assessment(tc, a, &workspace)?;
             let confirmed_role = a.confirmed.and_then(&role_of);
             if confirmed_role == Some(AreaRole::Assembly) {
                 assembly_since.get_or_insert(tc);
@@ -257,7 +283,7 @@ pub(crate) fn run_simulated_with(
                 assembly_dwell_s: assembly_since.map_or(0.0, |s| tc - s),
             };
             let adaptation = policy.decide(a, &ctx);
-            log.adaptation(tc, &adaptation);
+            log.adaptation(tc, &adaptation)?;
             if last_indicator != Some(adaptation.reason.indicator) {
                 if last_indicator.is_some() {
                     log.event(
@@ -265,7 +291,7 @@ pub(crate) fn run_simulated_with(
                         &TrialEvent::AdaptationChanged {
                             indicator: policies::indicator_key(adaptation.reason.indicator),
                         },
-                    );
+                    )?;
                 }
                 last_indicator = Some(adaptation.reason.indicator);
             }
@@ -310,18 +336,23 @@ pub(crate) fn run_simulated_with(
         for ev in controller.events() {
             match ev.kind {
                 TaskEventKind::PhaseChanged { to, .. } => {
-                    log.event(t, &TrialEvent::TaskPhase { phase: to.as_str() });
+                    log.event(
+                        t,
+                        &TrialEvent::TaskPhase {
+                            phase: phase_name(to),
+                        },
+                    )?;
                     if to == Phase::Present {
-                        log.event(t, &TrialEvent::Presented { handover: started });
+                        log.event(t, &TrialEvent::Presented { handover: started })?;
                     }
                 }
                 TaskEventKind::PresentTimeout => {
-                    log.event(t, &TrialEvent::PartReturned { handover: started })
+                    log.event(t, &TrialEvent::PartReturned { handover: started })?
                 }
                 TaskEventKind::ReleaseConfirmed => {
                     operator.release_confirmed();
                     for e in operator.events() {
-                        log.event(t, e);
+                        log.event(t, e)?;
                     }
                     done += 1;
                 }
@@ -342,12 +373,16 @@ pub(crate) fn run_simulated_with(
                         reaction: kind,
                         requirement: verdict.requirement().map_or("none", |r| r.id()),
                     },
-                );
+                )?;
             }
             last_verdict = kind;
         }
-        log.robot_state(t, &state);
-        log.command(t, &cmd, &verdict);
+        log.robot_state(t, &state)?;
+        log.command(t, &cmd, &verdict)?;
+        log.human_distance(
+            t,
+            min_human_distance_m(&humans, controller.control_points()),
+        )?;
         k += 1;
     }
 
@@ -363,8 +398,31 @@ pub(crate) fn run_simulated_with(
             break;
         }
     }
-    log.event(t_end, &TrialEvent::Finished { reason });
-    log.finish()
+    log.event(t_end, &TrialEvent::Finished { reason })?;
+    Ok(log.finish()?.dir)
+}
+
+/// The minimum distance between a tracked human point (head, hands; base frame) and the
+/// robot's control points (TCP, wrist, elbow at the measured joints) [m]; `None` when no human
+/// point is tracked.
+fn min_human_distance_m(
+    humans: &HumanPoints,
+    points: &robot_io::kinematics::ControlPoints,
+) -> Option<f64> {
+    [humans.head_m, humans.left_hand_m, humans.right_hand_m]
+        .iter()
+        .flatten()
+        .flat_map(|h| {
+            points.iter().map(move |p| {
+                let d = [
+                    h[0] - p.position.x,
+                    h[1] - p.position.y,
+                    h[2] - p.position.z,
+                ];
+                (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+            })
+        })
+        .reduce(f64::min)
 }
 
 fn assessor_role(ws: &Workspace, id: assess::AreaId) -> Option<AreaRole> {
@@ -435,6 +493,15 @@ mod tests {
         let s = spec(42, 45.0);
         let da = run_simulated(&s, a.path(), false).unwrap();
         let db = run_simulated(&s, b.path(), false).unwrap();
+        for f in [
+            "trial.mcap",
+            "indicators.csv",
+            "robot.csv",
+            "summary.json",
+            "report.html",
+        ] {
+            assert!(da.join(f).is_file(), "{f} missing from the trial folder");
+        }
         for f in ["indicators.csv", "summary.json"] {
             let x = std::fs::read(da.join(f)).unwrap();
             let y = std::fs::read(db.join(f)).unwrap();
