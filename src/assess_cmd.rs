@@ -11,7 +11,7 @@
 //! with `--force`.
 
 #[path = "report/mod.rs"]
-mod report;
+pub(crate) mod report;
 
 use std::fmt::Write as _;
 use std::fs;

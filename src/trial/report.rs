@@ -29,12 +29,9 @@ use super::log::summary::Summary;
 use super::log::{LogOptions, Recorded, TrialMeta};
 use assess_report::plot;
 
-/// The `hrc-adapt assess` outputs (`src/report`: the indicator table and figure), included here
-/// because `assess_cmd` keeps its `report` module private. Once it is `pub(crate)`, this becomes
-/// a `use`.
-#[path = "../report/mod.rs"]
-#[allow(dead_code, clippy::duplicate_mod)]
-pub(crate) mod assess_report;
+/// The `hrc-adapt assess` outputs (`src/report`: the indicator table and figure), shared with
+/// `hrc-adapt assess`.
+pub(crate) use crate::assess_cmd::report as assess_report;
 
 /// What [`write`] left.
 #[derive(Debug, Clone, PartialEq)]
