@@ -10,8 +10,7 @@
 //! end, so a failed run leaves no partial results. An existing non-empty `--out` is replaced only
 //! with `--force`.
 
-#[path = "report/mod.rs"]
-pub(crate) mod report;
+use crate::report;
 
 use std::fmt::Write as _;
 use std::fs;

@@ -3,6 +3,7 @@
 
 mod assess_cmd;
 mod experiment;
+mod report;
 mod robot_cmd;
 mod stats;
 mod trial;

@@ -31,7 +31,7 @@ use assess_report::plot;
 
 /// The `hrc-adapt assess` outputs (`src/report`: the indicator table and figure), shared with
 /// `hrc-adapt assess`.
-pub(crate) use crate::assess_cmd::report as assess_report;
+pub(crate) use crate::report as assess_report;
 
 /// What [`write`] left.
 #[derive(Debug, Clone, PartialEq)]
