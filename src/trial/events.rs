@@ -20,7 +20,9 @@ pub(crate) enum TrialEvent {
     Hesitation { active: bool },
     /// The policy changed its adaptation (the rule's indicator, or "none").
     AdaptationChanged { indicator: &'static str },
-    /// The safety supervisor did not pass a command unchanged.
+    /// The safety supervisor did not pass commands unchanged: a (reaction, requirement) pair that
+    /// held for the debounce time (see the `log` module docs, "Safety events"); stamped with
+    /// its onset.
     Safety {
         /// "reduced", "stopped" or "halted".
         reaction: &'static str,

@@ -23,6 +23,17 @@
 //! 10 ms of trial time; [`LogOptions::robot_full_rate`] keeps every sample). Separation
 //! samples are decimated the same way. Commands and events are all kept.
 //!
+//! # Safety events
+//! The supervisor judges every 500 Hz command; around the handover (present, release,
+//! retreat) its verdict flickers between SAF-REQ-007 stops and SAF-REQ-004 reductions from one
+//! cycle to the next (about 1,900 transitions in an L2 trial). The runtime therefore logs a
+//! `Safety` event (`/safety/events`, `summary.json`'s `safety_events`) only when the
+//! (reaction, requirement) pair changes to a non-`passed` pair **and** the new pair has held
+//! for 50 ms (`SAFETY_DEBOUNCE_S` in `runtime.rs`); the event is stamped with the time the pair
+//! started, so `/safety/events` may lag the other channels by up to 50 ms. A return to
+//! `passed` that holds 50 ms re-arms it. Nothing is lost: every individual verdict, with its
+//! requirement and limits, is on `/robot/command` at the full control rate.
+//!
 //! # Threads and the control path
 //! The control-rate methods only copy a `Copy` record into a ring preallocated at
 //! [`TrialLog::create`] ([`LogOptions::ring_capacity`] records): no allocation, no formatting, no

@@ -21,7 +21,8 @@
 //! - `dominant_time_s`: Σ Δt per reported dominant indicator (`AED`, `TID`, `ICD`, `ASD_ctx`,
 //!   `OHD`, `none`).
 //! - `adaptation_changes`: `AdaptationChanged` events, in total and by the new rule's indicator.
-//! - `safety_events`: `Safety` events, in total, by reaction and by requirement.
+//! - `safety_events`: `Safety` events (debounced verdict changes, see the `log` module docs),
+//!   in total, by reaction and by requirement.
 //!
 //! # Formatting
 //! Keys come in the order of the structs below (maps in sorted order); every real number is

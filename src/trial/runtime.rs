@@ -120,6 +120,55 @@ fn verdict_kind(v: &Verdict) -> &'static str {
     }
 }
 
+/// How long a supervisor verdict (reaction, requirement) must hold before it is logged as a
+/// safety event [s] (see the `log` module docs, "Safety events").
+const SAFETY_DEBOUNCE_S: f64 = 0.05;
+
+/// Turns the per-cycle supervisor verdicts into safety events: an event is emitted when the
+/// (reaction, requirement) pair changes to a non-`passed` pair **and** the new pair has held
+/// for `hold_s`; it is stamped with the time the pair started. A return to `passed` that holds
+/// for `hold_s` re-arms it (no event). Shorter excursions are not events; every verdict is still
+/// in `/robot/command`.
+#[derive(Debug, Clone, Copy)]
+struct SafetyDebounce {
+    hold_s: f64,
+    logged: (&'static str, &'static str),
+    candidate: (&'static str, &'static str),
+    since_s: f64,
+}
+
+impl SafetyDebounce {
+    const PASSED: (&'static str, &'static str) = ("passed", "none");
+
+    fn new(hold_s: f64) -> Self {
+        Self {
+            hold_s,
+            logged: Self::PASSED,
+            candidate: Self::PASSED,
+            since_s: 0.0,
+        }
+    }
+
+    /// Feeds the verdict of the cycle at `t_s`; returns (onset [s], pair) of a new event.
+    fn update(
+        &mut self,
+        t_s: f64,
+        pair: (&'static str, &'static str),
+    ) -> Option<(f64, (&'static str, &'static str))> {
+        if pair != self.candidate {
+            self.candidate = pair;
+            self.since_s = t_s;
+        }
+        if self.candidate != self.logged && t_s - self.since_s >= self.hold_s - 1e-9 {
+            self.logged = self.candidate;
+            if self.logged != Self::PASSED {
+                return Some((self.since_s, self.logged));
+            }
+        }
+        None
+    }
+}
+
 /// Live values for the progress display.
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct Live {
@@ -215,7 +264,7 @@ pub(crate) fn run_simulated_with(
     let mut started: u32 = 0; // handovers armed
     let mut done: u32 = 0; // handovers completed
     let mut last_indicator: Option<Option<assess::Indicator>> = None;
-    let mut last_verdict = "passed";
+    let mut safety_events = SafetyDebounce::new(SAFETY_DEBOUNCE_S);
     let mut assembly_since: Option<f64> = None;
     let mut prev_tcp_v = [0.0f64; 3];
     let mut peak_acc = 0.0f64;
@@ -364,18 +413,18 @@ pub(crate) fn run_simulated_with(
         world.perception_age_s = (t - last_cue_t).max(0.0);
         world.collaborating = controller.collaborating();
         let verdict = supervisor.step(&cmd, &world);
-        let kind = verdict_kind(&verdict);
-        if kind != last_verdict {
-            if kind != "passed" {
-                log.event(
-                    t,
-                    &TrialEvent::Safety {
-                        reaction: kind,
-                        requirement: verdict.requirement().map_or("none", |r| r.id()),
-                    },
-                )?;
-            }
-            last_verdict = kind;
+        let pair = (
+            verdict_kind(&verdict),
+            verdict.requirement().map_or("none", |r| r.id()),
+        );
+        if let Some((onset, (reaction, requirement))) = safety_events.update(t, pair) {
+            log.event(
+                onset,
+                &TrialEvent::Safety {
+                    reaction,
+                    requirement,
+                },
+            )?;
         }
         log.robot_state(t, &state)?;
         log.command(t, &cmd, &verdict)?;
@@ -484,6 +533,38 @@ mod tests {
             seed,
             config,
         }
+    }
+
+    #[test]
+    fn safety_events_are_debounced_pair_changes() {
+        let stop = ("stopped", "SAF-REQ-007");
+        let reduce = ("reduced", "SAF-REQ-004");
+        let mut d = SafetyDebounce::new(0.05);
+        let mut events = Vec::new();
+        // 2 ms cycles: 30 ms stop / 30 ms reduce flicker for 0.6 s, then 100 ms reduce, then
+        // 100 ms passed, then 100 ms reduce again.
+        let mut feed = |from: u32, to: u32, pair, events: &mut Vec<_>| {
+            for k in from..to {
+                if let Some(e) = d.update(f64::from(k) * 0.002, pair) {
+                    events.push(e);
+                }
+            }
+        };
+        for i in 0..10u32 {
+            feed(i * 30, i * 30 + 15, stop, &mut events);
+            feed(i * 30 + 15, i * 30 + 30, reduce, &mut events);
+        }
+        assert!(events.is_empty(), "flicker below 50 ms is not an event");
+        feed(300, 350, reduce, &mut events);
+        feed(350, 400, ("passed", "none"), &mut events);
+        feed(400, 450, reduce, &mut events);
+        assert_eq!(events.len(), 2, "{events:?}");
+        assert!(
+            (events[0].0 - 0.570).abs() < 1e-9,
+            "stamped at onset: {events:?}"
+        );
+        assert_eq!(events[0].1, reduce);
+        assert!((events[1].0 - 0.800).abs() < 1e-9);
     }
 
     #[test]
