@@ -1,390 +1,395 @@
-//! `hrc-adapt experiment`: policy A/B experiments (issue 5; being written).
+//! `hrc-adapt experiment`: a simulated policy A/B experiment (issue 5).
+//!
+//! 1. Reads the experiment TOML ([`ExperimentConfig`], `config/experiment-ab.toml`).
+//! 2. Draws the counterbalanced schedule with [`policies::ExperimentDesign`] (a Williams design
+//!    over the condition × policy cells, from the seed) and writes it as `schedule.csv` into
+//!    `<out-root>/<timestamp>-experiment/`.
+//! 3. Runs every trial with the simulated operator ([`crate::trial::run_simulated`]), one trial
+//!    folder each under the experiment folder. A participant's session is one job: its trials
+//!    run in schedule order on one worker; `--jobs` workers take sessions from a shared queue.
+//!    Trial seeds are [`trial_seed`] of the experiment seed, the participant number and the
+//!    trial's position, so a run is reproducible whatever the number of workers. A failed trial
+//!    (error or panic) is recorded and the experiment goes on.
+//! 4. Reads the trial folders' `summary.json` ([`aggregate`]), computes the statistics and writes
+//!    `experiment_summary.json` and the self-contained `experiment_report.html` ([`report`]).
 
-use std::path::PathBuf;
+pub(crate) mod aggregate;
+pub(crate) mod report;
 
+use std::collections::VecDeque;
+use std::io::IsTerminal as _;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, mpsc};
+
+use anyhow::Context as _;
 use clap::Args;
+use policies::{Condition, ExperimentDesign, PolicyKind, Schedule, SplitMix64};
+use serde::Deserialize;
+
+use crate::trial::config::TrialConfig;
+use crate::trial::{TrialSpec, run_simulated};
 
 /// Arguments of `hrc-adapt experiment`.
 #[derive(Debug, Args)]
 pub(crate) struct ExperimentArgs {
-    /// The experiment TOML (participants, conditions, policies, seed).
+    /// The experiment TOML (participants, conditions, policies, seed, trial config).
     #[arg(long)]
     config: PathBuf,
+    /// Folder under which `<timestamp>-experiment/` is created.
+    #[arg(long, default_value = "runs")]
+    out_root: PathBuf,
+    /// Trials run in parallel (default: the available cores).
+    #[arg(long)]
+    jobs: Option<usize>,
 }
 
+/// The experiment file (every key is documented in `config/experiment-ab.toml`).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct ExperimentConfig {
+    /// Number of simulated participants (named P01, P02, …).
+    pub(crate) participants: usize,
+    /// Task conditions (L1, L2, L3).
+    pub(crate) conditions: Vec<Condition>,
+    /// The two policies compared, treatment first: the Wilcoxon test is of `policies[0]` −
+    /// `policies[1]`.
+    pub(crate) policies: Vec<String>,
+    /// Seed of the schedule and of every trial's simulated operator.
+    pub(crate) seed: u64,
+    /// The trial configuration, relative to the experiment file.
+    pub(crate) trial_config: PathBuf,
+}
+
+impl ExperimentConfig {
+    /// Reads and checks an experiment file; `trial_config` becomes relative to the process.
+    pub(crate) fn from_file(path: &Path) -> anyhow::Result<ExperimentConfig> {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let mut cfg: ExperimentConfig =
+            toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        cfg.trial_config = path
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join(&cfg.trial_config);
+        anyhow::ensure!(
+            cfg.policies.len() == 2,
+            "{}: `policies` must name exactly two policies (treatment, baseline), got {}",
+            path.display(),
+            cfg.policies.len()
+        );
+        for p in &cfg.policies {
+            p.parse::<PolicyKind>()
+                .with_context(|| format!("{}: policies", path.display()))?;
+        }
+        Ok(cfg)
+    }
+
+    /// The design handed to [`ExperimentDesign::schedule`].
+    pub(crate) fn design(&self) -> ExperimentDesign {
+        ExperimentDesign {
+            participants: self.participants,
+            conditions: self.conditions.clone(),
+            policies: self.policies.clone(),
+            seed: self.seed,
+        }
+    }
+}
+
+/// The simulated operator's seed of participant `participant` (0-based) at 1-based session
+/// position `position`: the first SplitMix64 output seeded with the experiment seed mixed with
+/// both (participant in the high 32 bits, position in the low 32 bits, times the golden-ratio
+/// constant). Depends on nothing else, so a trial's seed is the same with any `--jobs`.
+pub(crate) fn trial_seed(seed: u64, participant: usize, position: usize) -> u64 {
+    let key = ((participant as u64) << 32) | position as u64;
+    SplitMix64::new(seed ^ key.wrapping_mul(0x9e37_79b9_7f4a_7c15)).next_u64()
+}
+
+/// One scheduled trial, ready to run.
+#[derive(Debug, Clone)]
+pub(crate) struct PlannedTrial {
+    /// Participant id (`P01`, …).
+    pub(crate) participant: String,
+    /// 1-based position in the participant's session.
+    pub(crate) position: usize,
+    /// Task condition.
+    pub(crate) condition: Condition,
+    /// Policy.
+    pub(crate) policy: PolicyKind,
+    /// Williams square row of the session.
+    pub(crate) square_row: usize,
+    /// Simulated operator seed ([`trial_seed`]).
+    pub(crate) seed: u64,
+    /// The trial folder's name under the experiment folder.
+    pub(crate) folder: String,
+}
+
+/// What became of one trial.
+#[derive(Debug, Clone)]
+pub(crate) struct TrialRun {
+    /// The trial.
+    pub(crate) trial: PlannedTrial,
+    /// Wall time [s].
+    pub(crate) wall_s: f64,
+    /// The error, if it failed.
+    pub(crate) error: Option<String>,
+}
+
+/// Every trial of `schedule`, session by session in running order.
+pub(crate) fn plan(schedule: &Schedule, seed: u64) -> anyhow::Result<Vec<Vec<PlannedTrial>>> {
+    schedule
+        .sessions
+        .iter()
+        .enumerate()
+        .map(|(p, s)| {
+            s.trials
+                .iter()
+                .enumerate()
+                .map(|(i, t)| {
+                    let position = i + 1;
+                    Ok(PlannedTrial {
+                        participant: s.participant.clone(),
+                        position,
+                        condition: t.condition,
+                        policy: t.policy.parse()?,
+                        square_row: s.square_row,
+                        seed: trial_seed(seed, p, position),
+                        folder: format!(
+                            "{}-{position:02}-{}-{}",
+                            s.participant, t.condition, t.policy
+                        ),
+                    })
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Writes `schedule.csv`: one row per trial, session by session in running order.
+pub(crate) fn write_schedule(path: &Path, sessions: &[Vec<PlannedTrial>]) -> anyhow::Result<()> {
+    let mut w =
+        csv::Writer::from_path(path).with_context(|| format!("creating {}", path.display()))?;
+    w.write_record([
+        "participant",
+        "position",
+        "condition",
+        "policy",
+        "square_row",
+        "seed",
+        "folder",
+    ])?;
+    for t in sessions.iter().flatten() {
+        w.write_record([
+            t.participant.clone(),
+            t.position.to_string(),
+            t.condition.to_string(),
+            t.policy.to_string(),
+            t.square_row.to_string(),
+            t.seed.to_string(),
+            t.folder.clone(),
+        ])?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+/// Runs every session on `jobs` worker threads (a session's trials in order on one worker) and
+/// returns every trial's outcome in schedule order. `on_done` is called on this thread after each
+/// trial.
+pub(crate) fn run_trials(
+    sessions: Vec<Vec<PlannedTrial>>,
+    trial_config: &TrialConfig,
+    dir: &Path,
+    jobs: usize,
+    on_done: &mut dyn FnMut(&TrialRun),
+) -> Vec<TrialRun> {
+    let order: Vec<(String, usize)> = sessions
+        .iter()
+        .flatten()
+        .map(|t| (t.participant.clone(), t.position))
+        .collect();
+    let queue = Arc::new(Mutex::new(VecDeque::from(sessions)));
+    let (tx, rx) = mpsc::channel::<TrialRun>();
+    let mut runs = Vec::with_capacity(order.len());
+    std::thread::scope(|scope| {
+        for _ in 0..jobs.max(1) {
+            let (queue, tx) = (queue.clone(), tx.clone());
+            scope.spawn(move || {
+                while let Some(session) = queue.lock().map_or(None, |mut q| q.pop_front()) {
+                    for trial in session {
+                        let run = run_one(trial, trial_config, dir);
+                        if tx.send(run).is_err() {
+                            return;
+                        }
+                    }
+                }
+            });
+        }
+        drop(tx);
+        for run in rx {
+            on_done(&run);
+            runs.push(run);
+        }
+    });
+    runs.sort_by_key(|r| {
+        order
+            .iter()
+            .position(|(p, i)| *p == r.trial.participant && *i == r.trial.position)
+    });
+    runs
+}
+
+/// Runs one trial; an error or a panic becomes [`TrialRun::error`].
+fn run_one(trial: PlannedTrial, trial_config: &TrialConfig, dir: &Path) -> TrialRun {
+    let started = std::time::Instant::now();
+    let spec = TrialSpec {
+        participant: trial.participant.clone(),
+        condition: trial.condition.as_str().parse().expect("L1..L3 parse"),
+        policy: trial.policy,
+        seed: trial.seed,
+        config: trial_config.clone(),
+    };
+    let out = dir.join(&trial.folder);
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        run_simulated(&spec, &out, false)
+    }));
+    let error = match result {
+        Ok(Ok(_)) => None,
+        Ok(Err(e)) => Some(format!("{e:#}")),
+        Err(panic) => Some(format!(
+            "panicked: {}",
+            panic
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| panic.downcast_ref::<&str>().copied())
+                .unwrap_or("(no message)")
+        )),
+    };
+    TrialRun {
+        trial,
+        wall_s: started.elapsed().as_secs_f64(),
+        error,
+    }
+}
+
+/// Runs `hrc-adapt experiment`.
 pub(crate) fn run(args: ExperimentArgs) -> anyhow::Result<()> {
-    anyhow::bail!(
-        "`experiment` is not implemented yet (issue 5); config {}",
-        args.config.display()
+    let jobs = args.jobs.unwrap_or_else(|| {
+        std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+    });
+    anyhow::ensure!(jobs >= 1, "--jobs must be at least 1");
+    let dir = args.out_root.join(format!("{}-experiment", wall_stamp()));
+    let show = std::io::stderr().is_terminal();
+    let out = run_experiment(&args.config, &dir, jobs, show)?;
+    eprintln!(
+        "[simulation] {} trials ({} failed) in {:.1} s wall time on {jobs} worker(s)",
+        out.trials, out.failed, out.wall_s
+    );
+    println!("{}", out.report.display());
+    Ok(())
+}
+
+/// What [`run_experiment`] did.
+#[derive(Debug)]
+pub(crate) struct ExperimentOutcome {
+    /// Trials run.
+    pub(crate) trials: usize,
+    /// Of which failed.
+    pub(crate) failed: usize,
+    /// Wall time of the whole experiment [s].
+    pub(crate) wall_s: f64,
+    /// `experiment_report.html`.
+    pub(crate) report: PathBuf,
+}
+
+/// The whole experiment into `dir` (created; must not exist yet).
+pub(crate) fn run_experiment(
+    config_path: &Path,
+    dir: &Path,
+    jobs: usize,
+    show_progress: bool,
+) -> anyhow::Result<ExperimentOutcome> {
+    let started = std::time::Instant::now();
+    let cfg = ExperimentConfig::from_file(config_path)?;
+    let trial_config = TrialConfig::from_file(&cfg.trial_config)?;
+    let schedule = cfg
+        .design()
+        .schedule()
+        .with_context(|| format!("{}: invalid design", config_path.display()))?;
+    let sessions = plan(&schedule, cfg.seed)?;
+    anyhow::ensure!(
+        !dir.exists(),
+        "{} exists already; refusing to mix experiments",
+        dir.display()
+    );
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    write_schedule(&dir.join("schedule.csv"), &sessions)?;
+
+    let total = sessions.iter().map(Vec::len).sum::<usize>();
+    let bar = if show_progress {
+        indicatif::ProgressBar::new(total as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "[simulation] {bar:30} {pos}/{len} trials, {elapsed} elapsed, ETA {eta} {msg}",
+        )
+        .expect("valid template"),
+    );
+    let mut failed = 0;
+    let runs = run_trials(sessions, &trial_config, dir, jobs, &mut |r| {
+        if let Some(e) = &r.error {
+            failed += 1;
+            bar.println(format!("trial {} failed: {e}", r.trial.folder));
+            bar.set_message(format!("({failed} failed)"));
+        }
+        bar.inc(1);
+    });
+    bar.finish_and_clear();
+
+    let outcomes = aggregate::read_outcomes(dir)?;
+    let report = report::write(
+        dir,
+        &report::Inputs {
+            config: &cfg,
+            schedule: &schedule,
+            runs: &runs,
+            outcomes: &outcomes,
+            jobs,
+            wall_s: started.elapsed().as_secs_f64(),
+        },
+    )?;
+    Ok(ExperimentOutcome {
+        trials: runs.len(),
+        failed: runs.iter().filter(|r| r.error.is_some()).count(),
+        wall_s: started.elapsed().as_secs_f64(),
+        report,
+    })
+}
+
+/// `YYYYmmdd-HHMMSS` (UTC) of the wall clock, for the folder name only.
+fn wall_stamp() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let (days, rem) = (secs / 86_400, secs % 86_400);
+    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
+    let z = days as i64 + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
     )
 }
 
-/// Aggregation and statistics over a folder of trial folders (each with its `summary.json`):
-/// the policy × condition table, the paired policy comparison (Wilcoxon + Holm) and the Friedman
-/// test across conditions. `run` wires it in once the trial runtime lands (issue 5).
-#[allow(dead_code)]
-pub(crate) mod aggregate {
-    use std::collections::BTreeMap;
-
-    use crate::stats;
-
-    /// The per-trial outcomes compared between policies, in this order: the `summary.json` key (or,
-    /// for the two wait times, the sum over `handovers[]`) and the report label.
-    pub(crate) const METRICS: [&str; 7] = [
-        "completion_time_s",
-        "hesitation_share",
-        "hrc_cwl_mean",
-        "operator_idle_s",
-        "robot_idle_s",
-        "robot_wait_s",
-        "operator_wait_s",
-    ];
-
-    /// One trial's `summary.json`, reduced to what the experiment statistics use.
-    #[derive(Debug, Clone, PartialEq)]
-    pub(crate) struct TrialOutcome {
-        /// `meta.participant`.
-        pub(crate) participant: String,
-        /// `meta.condition` (L1, L2, L3).
-        pub(crate) condition: String,
-        /// `meta.policy` (e.g. `fixed`, `adaptive`).
-        pub(crate) policy: String,
-        /// The [`METRICS`] values, in that order; the wait times are totals over the trial's
-        /// handovers [s].
-        pub(crate) metrics: [f64; METRICS.len()],
-    }
-
-    /// Parses one `summary.json` text.
-    pub(crate) fn parse_summary(text: &str) -> anyhow::Result<TrialOutcome> {
-        use anyhow::Context as _;
-        let v: serde_json::Value =
-            serde_json::from_str(text).context("summary.json is not JSON")?;
-        let meta_str = |key: &str| -> anyhow::Result<String> {
-            v["meta"][key]
-                .as_str()
-                .map(str::to_owned)
-                .with_context(|| format!("summary.json: meta.{key} missing or not a string"))
-        };
-        let num = |key: &str| -> anyhow::Result<f64> {
-            v[key]
-                .as_f64()
-                .with_context(|| format!("summary.json: {key} missing or not a number"))
-        };
-        let (participant, condition, policy) = (
-            meta_str("participant")?,
-            meta_str("condition")?,
-            meta_str("policy")?,
-        );
-        let handovers = v["handovers"]
-            .as_array()
-            .context("summary.json: handovers missing or not an array")?;
-        let wait_sum = |key: &str| -> anyhow::Result<f64> {
-            handovers.iter().enumerate().try_fold(0.0, |acc, (i, h)| {
-                h[key]
-                    .as_f64()
-                    .map(|w| acc + w)
-                    .with_context(|| format!("summary.json: handovers[{i}].{key} missing"))
-            })
-        };
-        Ok(TrialOutcome {
-            participant,
-            condition,
-            policy,
-            metrics: [
-                num("completion_time_s")?,
-                num("hesitation_share")?,
-                num("hrc_cwl_mean")?,
-                num("operator_idle_s")?,
-                num("robot_idle_s")?,
-                wait_sum("robot_wait_s")?,
-                wait_sum("operator_wait_s")?,
-            ],
-        })
-    }
-
-    /// Reads `summary.json` from every direct sub-folder of `runs` that has one, sorted by folder
-    /// name (so the result does not depend on the file system's order).
-    pub(crate) fn read_outcomes(runs: &std::path::Path) -> anyhow::Result<Vec<TrialOutcome>> {
-        use anyhow::Context as _;
-        let mut paths = Vec::new();
-        for entry in
-            std::fs::read_dir(runs).with_context(|| format!("reading {}", runs.display()))?
-        {
-            let path = entry?.path().join("summary.json");
-            if path.is_file() {
-                paths.push(path);
-            }
-        }
-        paths.sort();
-        paths
-            .iter()
-            .map(|p| {
-                let text = std::fs::read_to_string(p)
-                    .with_context(|| format!("reading {}", p.display()))?;
-                parse_summary(&text).with_context(|| format!("in {}", p.display()))
-            })
-            .collect()
-    }
-
-    /// One cell of the policy × condition table: a metric's trials summarised.
-    #[derive(Debug, Clone, Copy, PartialEq)]
-    pub(crate) struct Cell {
-        /// Number of trials.
-        pub(crate) n: usize,
-        /// Mean.
-        pub(crate) mean: f64,
-        /// Median (mean of the middle two for even n).
-        pub(crate) median: f64,
-    }
-
-    /// The policy × condition table of every metric: `table[(policy, condition)][metric index]`.
-    pub(crate) fn table(
-        outcomes: &[TrialOutcome],
-    ) -> BTreeMap<(String, String), [Cell; METRICS.len()]> {
-        let mut groups: BTreeMap<(String, String), Vec<&TrialOutcome>> = BTreeMap::new();
-        for o in outcomes {
-            groups
-                .entry((o.policy.clone(), o.condition.clone()))
-                .or_default()
-                .push(o);
-        }
-        groups
-            .into_iter()
-            .map(|(key, trials)| {
-                let cells = std::array::from_fn(|m| {
-                    let mut xs: Vec<f64> = trials.iter().map(|t| t.metrics[m]).collect();
-                    xs.sort_by(f64::total_cmp);
-                    let n = xs.len();
-                    let median = if n % 2 == 1 {
-                        xs[n / 2]
-                    } else {
-                        (xs[n / 2 - 1] + xs[n / 2]) / 2.0
-                    };
-                    Cell {
-                        n,
-                        mean: xs.iter().sum::<f64>() / n as f64,
-                        median,
-                    }
-                });
-                (key, cells)
-            })
-            .collect()
-    }
-
-    /// The paired policy comparison of one metric.
-    #[derive(Debug, Clone, PartialEq)]
-    pub(crate) struct PolicyTest {
-        /// Index into [`METRICS`].
-        pub(crate) metric: usize,
-        /// The Wilcoxon signed-rank test of `a − b` (zero handling: Wilcox, scipy's default; method
-        /// chosen as scipy's `auto`), or why the metric could not be tested (e.g. every difference
-        /// zero: the policies do not differ on it).
-        pub(crate) wilcoxon: Result<stats::WilcoxonResult, stats::StatsError>,
-        /// The Holm-adjusted p-value across the metrics that could be tested.
-        pub(crate) p_holm: Option<f64>,
-    }
-
-    /// Paired comparison of policy `a` against `b` for every metric: each participant contributes
-    /// one pair, their mean over the conditions they ran under both policies (trials of one
-    /// participant are not independent, so they are not paired per condition). Wilcoxon
-    /// signed-rank per metric, Holm across the metrics that could be tested.
-    pub(crate) fn compare_policies(
-        outcomes: &[TrialOutcome],
-        a: &str,
-        b: &str,
-    ) -> anyhow::Result<Vec<PolicyTest>> {
-        // participant -> condition -> (a, b)
-        let mut by_participant: BTreeMap<&str, BTreeMap<&str, [Option<&TrialOutcome>; 2]>> =
-            BTreeMap::new();
-        for o in outcomes {
-            let side = if o.policy == a {
-                0
-            } else if o.policy == b {
-                1
-            } else {
-                continue;
-            };
-            let slot = by_participant
-                .entry(&o.participant)
-                .or_default()
-                .entry(&o.condition)
-                .or_default();
-            anyhow::ensure!(
-                slot[side].is_none(),
-                "participant {} ran condition {} with policy {} twice",
-                o.participant,
-                o.condition,
-                o.policy
-            );
-            slot[side] = Some(o);
-        }
-        let mut tests = Vec::with_capacity(METRICS.len());
-        for m in 0..METRICS.len() {
-            let (mut xa, mut xb) = (Vec::new(), Vec::new());
-            for conditions in by_participant.values() {
-                let pairs: Vec<(f64, f64)> = conditions
-                    .values()
-                    .filter_map(|s| Some((s[0]?.metrics[m], s[1]?.metrics[m])))
-                    .collect();
-                if !pairs.is_empty() {
-                    let k = pairs.len() as f64;
-                    xa.push(pairs.iter().map(|p| p.0).sum::<f64>() / k);
-                    xb.push(pairs.iter().map(|p| p.1).sum::<f64>() / k);
-                }
-            }
-            anyhow::ensure!(!xa.is_empty(), "no participant ran both {a} and {b}");
-            let wilcoxon = stats::wilcoxon(&xa, &xb, stats::WilcoxonOptions::default());
-            tests.push(PolicyTest {
-                metric: m,
-                wilcoxon,
-                p_holm: None,
-            });
-        }
-        let p: Vec<f64> = tests
-            .iter()
-            .filter_map(|t| Some(t.wilcoxon.as_ref().ok()?.p_value))
-            .collect();
-        let mut adjusted = stats::holm(&p)
-            .map_err(|e| anyhow::anyhow!("Holm: {e}"))?
-            .into_iter();
-        for t in tests.iter_mut().filter(|t| t.wilcoxon.is_ok()) {
-            t.p_holm = adjusted.next();
-        }
-        Ok(tests)
-    }
-
-    /// Friedman test across conditions of every metric for one policy: blocks are the participants
-    /// who ran every condition (sorted by name) under it; others are left out. One entry per
-    /// metric, in [`METRICS`] order, with why it could not be computed (e.g. every block tied).
-    pub(crate) fn friedman_across_conditions(
-        outcomes: &[TrialOutcome],
-        policy: &str,
-    ) -> Vec<Result<stats::FriedmanResult, stats::StatsError>> {
-        let conditions: std::collections::BTreeSet<&str> = outcomes
-            .iter()
-            .filter(|o| o.policy == policy)
-            .map(|o| o.condition.as_str())
-            .collect();
-        let mut rows: BTreeMap<&str, BTreeMap<&str, &TrialOutcome>> = BTreeMap::new();
-        for o in outcomes.iter().filter(|o| o.policy == policy) {
-            rows.entry(&o.participant)
-                .or_default()
-                .insert(&o.condition, o);
-        }
-        let complete: Vec<_> = rows
-            .values()
-            .filter(|r| r.len() == conditions.len())
-            .collect();
-        (0..METRICS.len())
-            .map(|m| {
-                let blocks: Vec<Vec<f64>> = complete
-                    .iter()
-                    .map(|r| r.values().map(|o| o.metrics[m]).collect())
-                    .collect();
-                stats::friedman(&blocks)
-            })
-            .collect()
-    }
-
-    #[cfg(test)]
-    mod tests {
-        use super::*;
-
-        /// A hand-made summary.json with the keys the trial log writes.
-        fn summary(p: &str, c: &str, policy: &str, t: f64, waits: [f64; 2]) -> String {
-            format!(
-                r#"{{"meta": {{"participant": "{p}", "condition": "{c}", "policy": "{policy}"}},
-                    "completion_time_s": {t}, "hesitation_share": {h}, "hrc_cwl_mean": {cwl},
-                    "operator_idle_s": {oi}, "robot_idle_s": 3.0,
-                    "handovers": [{{"robot_wait_s": {rw}, "operator_wait_s": 1.0}},
-                                  {{"robot_wait_s": 0.5, "operator_wait_s": {ow}}}]}}"#,
-                h = t / 1000.0,
-                cwl = t / 250.0,
-                oi = t / 10.0,
-                rw = waits[0],
-                ow = waits[1],
-            )
-        }
-
-        #[test]
-        fn parses_and_sums_handover_waits() {
-            let o = parse_summary(&summary("P01", "L2", "adaptive", 100.0, [2.0, 3.0])).unwrap();
-            assert_eq!(
-                (
-                    o.participant.as_str(),
-                    o.condition.as_str(),
-                    o.policy.as_str()
-                ),
-                ("P01", "L2", "adaptive")
-            );
-            assert_eq!(o.metrics, [100.0, 0.1, 0.4, 10.0, 3.0, 2.5, 4.0]);
-            let err =
-                parse_summary(r#"{"meta": {"participant": "P", "condition": "L1"}}"#).unwrap_err();
-            assert!(err.to_string().contains("meta.policy"), "{err}");
-        }
-
-        #[test]
-        fn reads_folders_aggregates_and_tests() {
-            let dir = tempfile::tempdir().unwrap();
-            // 8 participants × 3 conditions × 2 policies; adaptive is faster by 5 + i s.
-            for i in 0..8 {
-                for (ci, c) in ["L1", "L2", "L3"].iter().enumerate() {
-                    for policy in ["fixed", "adaptive"] {
-                        let base = 100.0 + 10.0 * ci as f64 + i as f64;
-                        let t = if policy == "adaptive" {
-                            base - 5.0 - i as f64
-                        } else {
-                            base
-                        };
-                        let folder = dir.path().join(format!("run-P{i}-{c}-{policy}"));
-                        std::fs::create_dir(&folder).unwrap();
-                        std::fs::write(
-                            folder.join("summary.json"),
-                            summary(&format!("P{i}"), c, policy, t, [1.0, 1.0]),
-                        )
-                        .unwrap();
-                    }
-                }
-            }
-            std::fs::create_dir(dir.path().join("not-a-trial")).unwrap();
-            let outcomes = read_outcomes(dir.path()).unwrap();
-            assert_eq!(outcomes.len(), 48);
-
-            let tab = table(&outcomes);
-            assert_eq!(tab.len(), 6);
-            let cell = tab[&("fixed".to_owned(), "L2".to_owned())][0];
-            // fixed L2 completion times 110..=117: mean = median = 113.5.
-            assert_eq!((cell.n, cell.mean, cell.median), (8, 113.5, 113.5));
-
-            let tests = compare_policies(&outcomes, "adaptive", "fixed").unwrap();
-            assert_eq!(tests.len(), METRICS.len());
-            // Completion time: all 8 differences negative and distinct → exact p = 2/256.
-            let ct = tests[0].wilcoxon.as_ref().unwrap();
-            assert_eq!(
-                (ct.r_plus, ct.r_minus, ct.p_value),
-                (0.0, 36.0, 2.0 / 256.0)
-            );
-            assert_eq!(ct.rank_biserial, -1.0);
-            // Robot idle and both wait totals are equal under both policies: not testable, and
-            // left out of the Holm family, which is the 4 metrics that scale with completion time
-            // (all p = 2/256 → Holm 4·p).
-            for (t, testable) in tests
-                .iter()
-                .zip([true, true, true, true, false, false, false])
-            {
-                assert_eq!(t.wilcoxon.is_ok(), testable, "{}", METRICS[t.metric]);
-                match t.p_holm {
-                    Some(q) => assert!((q - 4.0 * 2.0 / 256.0).abs() < 1e-15),
-                    None => assert!(!testable),
-                }
-            }
-            // Friedman across L1–L3 under `fixed`: completion time ranks 1, 2, 3 in every block →
-            // χ² = n(k − 1) = 16, W = 1, p = e^−8; the constant robot idle time is all ties.
-            let fr = friedman_across_conditions(&outcomes, "fixed");
-            let ct = fr[0].as_ref().unwrap();
-            assert_eq!((ct.n, ct.k, ct.statistic, ct.kendall_w), (8, 3, 16.0, 1.0));
-            assert!((ct.p_value - (-8.0_f64).exp()).abs() < 1e-15);
-            assert!(fr[4].is_err());
-        }
-    }
-}
+#[cfg(test)]
+mod tests;
