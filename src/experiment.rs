@@ -214,6 +214,17 @@ pub(crate) fn run_trials(
         for _ in 0..jobs.max(1) {
             let (queue, tx) = (queue.clone(), tx.clone());
             scope.spawn(move || {
+                // Many trials' per-cycle supervisor messages would bury the progress bar:
+                // workers log errors only unless RUST_LOG says otherwise (safety events are in
+                // each trial's log and summary.json).
+                let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+                    .unwrap_or_else(|_| "error".into());
+                let _log = tracing::subscriber::set_default(
+                    tracing_subscriber::fmt()
+                        .with_env_filter(filter)
+                        .with_writer(std::io::stderr)
+                        .finish(),
+                );
                 while let Some(session) = queue.lock().map_or(None, |mut q| q.pop_front()) {
                     for trial in session {
                         let run = run_one(trial, trial_config, dir);
