@@ -7,6 +7,7 @@
 //! - [`log`]: the trial log (`trial.mcap`, `indicators.csv`, `robot.csv`, `summary.json`,
 //!   `report.html`), fed directly by the runtime.
 
+mod backend;
 pub(crate) mod config;
 mod events;
 mod log;
@@ -45,6 +46,9 @@ pub(crate) struct TrialArgs {
     /// Robot: `sim` (in-process, mock clock), `emulator` (loopback RTDE) or a UR5e's address.
     #[arg(long, default_value = "sim")]
     robot: String,
+    /// `--robot emulator`: controller cycles the emulator runs per 2 ms of wall time.
+    #[arg(long, default_value_t = 4)]
+    speedup: u32,
     /// Folder under which the run folder is created.
     #[arg(long, default_value = "runs")]
     out_root: PathBuf,
@@ -63,14 +67,13 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
         seed: args.seed,
         config,
     };
-    match args.robot.as_str() {
-        "sim" => {}
-        "emulator" => anyhow::bail!(
-            "--robot emulator is not wired yet (the emulator runs on the wall clock; see the \
-             trial runtime docs); use --robot sim"
-        ),
-        ip => anyhow::bail!("--robot {ip}: real UR5e sessions are not wired yet; use --robot sim"),
-    }
+    let robot = match args.robot.as_str() {
+        "sim" => runtime::RobotChoice::Sim,
+        "emulator" => runtime::RobotChoice::Emulator {
+            speedup: args.speedup,
+        },
+        host => runtime::RobotChoice::Ur(host.to_owned()),
+    };
     // The wall clock is used only for the folder name.
     let stamp = wall_stamp();
     let dir = args.out_root.join(format!(
@@ -83,14 +86,16 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
     install_ctrl_c(stop.clone());
     let bar = runtime::progress_bar(true);
     let started = std::time::Instant::now();
-    let out =
-        runtime::run_simulated_with(&spec, &dir, &stop, &mut |l| runtime::update_bar(&bar, l))?;
+    let out = runtime::run_trial_with(&spec, &robot, &dir, &stop, &mut |l| {
+        runtime::update_bar(&bar, l)
+    })?;
     bar.finish_and_clear();
     if stop.load(Ordering::Relaxed) {
         eprintln!("interrupted: robot stopped, logs closed");
     }
     eprintln!(
-        "[simulation] trial finished in {:.1} s wall time",
+        "[simulation] trial on {} finished in {:.1} s wall time",
+        args.robot,
         started.elapsed().as_secs_f64()
     );
     println!("{}", out.display());

@@ -184,11 +184,46 @@ pub(crate) struct Live {
     pub(crate) handovers: u32,
 }
 
+/// The robot a trial runs on.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum RobotChoice {
+    /// In-process `SimRobot` on the mock clock (deterministic).
+    Sim,
+    /// The controller emulator in-process over loopback RTDE, `speedup` cycles per 2 ms.
+    Emulator {
+        /// Controller cycles per 2 ms of wall time.
+        speedup: u32,
+    },
+    /// A real UR5e at this address.
+    Ur(String),
+}
+
+/// Where the loop's time comes from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Clock {
+    /// Cycle count × 2 ms (the lockstep `SimRobot`).
+    Mock,
+    /// The controller timestamp of each new sample, from the first one.
+    Controller,
+}
+
 /// Run one simulated trial into `out_dir` (created), calling `progress` at the cue rate. Stops
 /// early when `stop` becomes true (the robot is stopped through the supervisor, the logs are
 /// closed). Returns the folder.
 pub(crate) fn run_simulated_with(
     spec: &TrialSpec,
+    out_dir: &Path,
+    stop: &AtomicBool,
+    progress: &mut dyn FnMut(&Live),
+) -> anyhow::Result<PathBuf> {
+    run_trial_with(spec, &RobotChoice::Sim, out_dir, stop, progress)
+}
+
+/// Run one trial on `robot` (see [`run_simulated_with`]). `Sim` runs on the mock clock;
+/// the RTDE robots run paced on the controller's timestamps (`backend.rs`).
+pub(crate) fn run_trial_with(
+    spec: &TrialSpec,
+    robot: &RobotChoice,
     out_dir: &Path,
     stop: &AtomicBool,
     progress: &mut dyn FnMut(&Live),
@@ -207,15 +242,95 @@ pub(crate) fn run_simulated_with(
     .with_context(|| format!("parsing {}", cfg.controller.display()))?;
     let ctl_cfg = ControllerConfig::try_from(&raw.controller)?;
     let table = RuleTable::from_toml_file(&cfg.policy_table)?;
+    let setup = Setup {
+        workspace,
+        assess_cfg,
+        ctl_cfg,
+        table,
+    };
+    let home = setup.ctl_cfg.task.home_q_rad;
+    match robot {
+        RobotChoice::Sim => {
+            let sim = SimRobot::new(SimConfig {
+                initial_q_rad: home,
+                ..SimConfig::ur5e()
+            })?;
+            let robot = LockstepSim { sim, first: true };
+            drive(
+                spec,
+                setup,
+                robot,
+                Clock::Mock,
+                "sim",
+                out_dir,
+                stop,
+                progress,
+            )
+        }
+        RobotChoice::Emulator { speedup } => {
+            let (robot, guard) = super::backend::start_emulator(home, *speedup)?;
+            let out = drive(
+                spec,
+                setup,
+                robot,
+                Clock::Controller,
+                "emulator",
+                out_dir,
+                stop,
+                progress,
+            );
+            guard.close();
+            out
+        }
+        RobotChoice::Ur(host) => {
+            let (robot, guard) = super::backend::connect_ur(host)?;
+            let out = drive(
+                spec,
+                setup,
+                robot,
+                Clock::Controller,
+                host,
+                out_dir,
+                stop,
+                progress,
+            );
+            guard.close();
+            out
+        }
+    }
+}
+
+/// Everything loaded from the trial config before the robot is chosen.
+struct Setup {
+    workspace: Workspace,
+    assess_cfg: AssessConfig,
+    ctl_cfg: ControllerConfig,
+    table: RuleTable,
+}
+
+/// The trial loop on any robot.
+#[allow(clippy::too_many_arguments)]
+fn drive<R: Robot>(
+    spec: &TrialSpec,
+    setup: Setup,
+    robot: R,
+    clock: Clock,
+    robot_label: &str,
+    out_dir: &Path,
+    stop: &AtomicBool,
+    progress: &mut dyn FnMut(&Live),
+) -> anyhow::Result<PathBuf> {
+    let cfg = &spec.config;
+    let Setup {
+        workspace,
+        assess_cfg,
+        ctl_cfg,
+        table,
+    } = setup;
     let mut policy = spec.policy.build(&table);
     let mut assessor = Assessor::new(workspace.clone(), assess_cfg.clone())?;
     let mut operator = SimulatedOperator::new(spec.condition, &workspace, spec.seed)?;
-    let sim = SimRobot::new(SimConfig {
-        initial_q_rad: ctl_cfg.task.home_q_rad,
-        ..SimConfig::ur5e()
-    })?;
-    let mut supervisor =
-        Supervisor::new(LockstepSim { sim, first: true }, SupervisorConfig::ur5e())?;
+    let mut supervisor = Supervisor::new(robot, SupervisorConfig::ur5e())?;
     let mut controller = Controller::new(ctl_cfg)?;
     let meta = TrialMeta {
         participant: spec.participant.clone(),
@@ -225,7 +340,7 @@ pub(crate) fn run_simulated_with(
         simulated: true,
         // Wall clock: only in trial.mcap's /trial/meta and the report, never in summary.json.
         started_utc: super::utc_now_iso(),
-        robot: "sim".to_owned(),
+        robot: robot_label.to_owned(),
     };
     let mut log = TrialLog::create(
         out_dir,
@@ -276,19 +391,42 @@ pub(crate) fn run_simulated_with(
     let mut reason = "max_duration";
 
     let mut k: u64 = 0;
+    let mut t0: Option<f64> = None;
+    let mut prev_t = 0.0;
+    let mut t = 0.0;
     while k < max_cycles {
-        let t = k as f64 * CYCLE_S;
         if stop.load(Ordering::Relaxed) {
             reason = "interrupted";
             break;
         }
         supervisor.read_state(&mut state)?;
+        let dt = match clock {
+            Clock::Mock => {
+                t = k as f64 * CYCLE_S;
+                CYCLE_S
+            }
+            Clock::Controller => {
+                let start = *t0.get_or_insert(state.timestamp_s);
+                t = state.timestamp_s - start;
+                if t >= cfg.max_duration_s {
+                    break;
+                }
+                if state.runtime_state != robot_io::runtime_state::PLAYING {
+                    // The control program stopped (watchdog, protective stop, pendant):
+                    // nothing we send moves the robot any more.
+                    reason = "robot_program_stopped";
+                    break;
+                }
+                (t - prev_t).max(CYCLE_S)
+            }
+        };
+        prev_t = t;
         let v = &state.actual_tcp_speed;
         let acc = ((v[0] - prev_tcp_v[0]).powi(2)
             + (v[1] - prev_tcp_v[1]).powi(2)
             + (v[2] - prev_tcp_v[2]).powi(2))
         .sqrt()
-            / CYCLE_S;
+            / dt;
         if k > 0 {
             peak_acc = peak_acc.max(acc);
         }
@@ -296,7 +434,7 @@ pub(crate) fn run_simulated_with(
 
         // --- 30 Hz: operator → assessor → policy ---
         // Frame n is due at cycle ceil(n / rate / 2 ms): integer test k·2ms·rate ≥ n.
-        if (k as f64) * CYCLE_S * cue_rate + 1e-9 >= next_cue as f64 {
+        if t * cue_rate + 1e-9 >= next_cue as f64 {
             let tc = next_cue as f64 / cue_rate;
             next_cue += 1;
             let p = &state.actual_tcp_pose;
@@ -436,7 +574,10 @@ pub(crate) fn run_simulated_with(
     }
 
     // Stop the robot through the supervisor (a few cycles of stop commands), then close.
-    let t_end = k as f64 * CYCLE_S;
+    let t_end = match clock {
+        Clock::Mock => k as f64 * CYCLE_S,
+        Clock::Controller => t + CYCLE_S,
+    };
     let stop_cmd = JointCommand::Stop { decel: 3.0 };
     for j in 0..250u64 {
         supervisor.read_state(&mut state)?;
@@ -448,7 +589,15 @@ pub(crate) fn run_simulated_with(
         }
     }
     log.event(t_end, &TrialEvent::Finished { reason })?;
-    Ok(log.finish()?.dir)
+    let dir = log.finish()?.dir;
+    anyhow::ensure!(
+        reason != "robot_program_stopped",
+        "the robot's control program stopped at t = {t:.3} s (runtime state {}); the logs up \
+         to then are in {}",
+        state.runtime_state,
+        dir.display()
+    );
+    Ok(dir)
 }
 
 /// The minimum distance between a tracked human point (head, hands; base frame) and the
@@ -565,6 +714,37 @@ mod tests {
         );
         assert_eq!(events[0].1, reduce);
         assert!((events[1].0 - 0.800).abs() < 1e-9);
+    }
+
+    #[test]
+    fn emulator_trial_runs_over_loopback_rtde_and_writes_every_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let stop = AtomicBool::new(false);
+        let out = run_trial_with(
+            &spec(7, 6.0),
+            &RobotChoice::Emulator { speedup: 10 },
+            dir.path(),
+            &stop,
+            &mut |_| {},
+        )
+        .unwrap();
+        for f in [
+            "trial.mcap",
+            "indicators.csv",
+            "robot.csv",
+            "summary.json",
+            "report.html",
+        ] {
+            assert!(out.join(f).is_file(), "{f} missing");
+        }
+        let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
+        assert!(summary.contains("\"robot\": \"emulator\""), "{summary}");
+        // Paced on the controller clock: about 6 s of trial time were assessed at 30 Hz.
+        let rows = std::fs::read_to_string(out.join("indicators.csv"))
+            .unwrap()
+            .lines()
+            .count();
+        assert!((150..=200).contains(&rows), "{rows} indicator rows");
     }
 
     #[test]
