@@ -2,7 +2,11 @@
 //!
 //! - [`operator`]: the **simulated operator** (seeded stochastic gearbox-task model);
 //! - [`runtime`]: cues → assessor (30 Hz) → policy → controller (500 Hz) → supervisor → robot
-//!   on a mock clock ([`runtime::run_simulated`] for the experiment runner);
+//!   on a mock clock with `SimRobot` ([`runtime::run_simulated`], for the experiment runner
+//!   and the determinism test) or on the controller's clock over RTDE;
+//! - `backend`: the RTDE robots: the controller emulator in-process on loopback ports
+//!   (`--robot emulator`, the default; L2 trials take 46-59 s of wall time at the default
+//!   `--speedup 4`) and a real UR5e (`--robot <ip>`: dashboard checks and a confirmation first);
 //! - [`config`]: `config/trial.toml` (files, rates, workspace → robot base transform);
 //! - [`log`]: the trial log (`trial.mcap`, `indicators.csv`, `robot.csv`, `summary.json`,
 //!   `report.html`), fed directly by the runtime.
@@ -43,8 +47,9 @@ pub(crate) struct TrialArgs {
     /// Trial configuration (default: the shipped config/trial.toml).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Robot: `sim` (in-process, mock clock), `emulator` (loopback RTDE) or a UR5e's address.
-    #[arg(long, default_value = "sim")]
+    /// Robot: `emulator` (in-process controller emulator over loopback RTDE, paced on its
+    /// clock), `sim` (in-process, mock clock, deterministic) or a UR5e's address.
+    #[arg(long, default_value = "emulator")]
     robot: String,
     /// `--robot emulator`: controller cycles the emulator runs per 2 ms of wall time.
     #[arg(long, default_value_t = 4)]

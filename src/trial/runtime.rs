@@ -1,5 +1,7 @@
-//! The trial runtime on a **mock clock**: simulated operator (cues, 30 Hz) → `Assessor` →
-//! policy → `Controller` (500 Hz) → `Supervisor` → `SimRobot`.
+//! The trial runtime: simulated operator (cues, 30 Hz) → `Assessor` → policy → `Controller`
+//! (500 Hz) → `Supervisor` → robot. With `--robot sim` (below) it runs on a **mock clock**; with
+//! an RTDE robot (`backend.rs`: the emulator or a UR5e) the same loop runs once per new
+//! controller timestamp, with the controller's time as trial time (not deterministic).
 //!
 //! Time is the control cycle count × 2 ms; nothing in this path reads the wall clock, so a
 //! trial is deterministic for its seed and config and runs as fast as the CPU allows. The
