@@ -87,6 +87,18 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
         spec.condition.as_str(),
         spec.policy.as_str()
     ));
+    // The supervisor's per-cycle messages (about 900 warnings per L2 trial) would bury the
+    // live display: the trial thread logs warnings of the trial itself and errors only, unless
+    // RUST_LOG says otherwise. Every verdict is in trial.mcap (/robot/command), and the
+    // debounced safety events in /safety/events and summary.json.
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| "error,hrc_adapt=warn".into());
+    let _log = tracing::subscriber::set_default(
+        tracing_subscriber::fmt()
+            .with_env_filter(filter)
+            .with_writer(std::io::stderr)
+            .finish(),
+    );
     let stop = Arc::new(AtomicBool::new(false));
     install_ctrl_c(stop.clone());
     let bar = runtime::progress_bar(true);
