@@ -288,7 +288,9 @@ pub(crate) fn run(args: ExperimentArgs) -> anyhow::Result<()> {
         std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
     });
     anyhow::ensure!(jobs >= 1, "--jobs must be at least 1");
-    let dir = args.out_root.join(format!("{}-experiment", wall_stamp()));
+    let dir = args
+        .out_root
+        .join(format!("{}-experiment", crate::trial::wall_stamp()));
     let show = std::io::stderr().is_terminal();
     let out = run_experiment(&args.config, &dir, jobs, show)?;
     eprintln!(
@@ -376,30 +378,6 @@ pub(crate) fn run_experiment(
         wall_s: started.elapsed().as_secs_f64(),
         report,
     })
-}
-
-/// `YYYYmmdd-HHMMSS` (UTC) of the wall clock, for the folder name only.
-fn wall_stamp() -> String {
-    let secs = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
-    let (days, rem) = (secs / 86_400, secs % 86_400);
-    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
-    let z = days as i64 + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    format!(
-        "{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
-        rem / 3600,
-        rem % 3600 / 60,
-        rem % 60
-    )
 }
 
 #[cfg(test)]

@@ -28,12 +28,12 @@ const PANEL_PX: (u32, u32) = (1000, 460);
 const FIGURE_PX: (u32, u32) = (2000, 920);
 
 // A colour-blind-safe palette (Okabe–Ito).
-const BLUE: RGBColor = RGBColor(0, 114, 178);
-const ORANGE: RGBColor = RGBColor(230, 159, 0);
-const GREEN: RGBColor = RGBColor(0, 158, 115);
-const VERMILION: RGBColor = RGBColor(213, 94, 0);
-const PURPLE: RGBColor = RGBColor(204, 121, 167);
-const SKY: RGBColor = RGBColor(86, 180, 233);
+pub(crate) const BLUE: RGBColor = RGBColor(0, 114, 178);
+pub(crate) const ORANGE: RGBColor = RGBColor(230, 159, 0);
+pub(crate) const GREEN: RGBColor = RGBColor(0, 158, 115);
+pub(crate) const VERMILION: RGBColor = RGBColor(213, 94, 0);
+pub(crate) const PURPLE: RGBColor = RGBColor(204, 121, 167);
+pub(crate) const SKY: RGBColor = RGBColor(86, 180, 233);
 const GREY: RGBColor = RGBColor(120, 120, 120);
 
 /// Everything the figure shows.
@@ -122,7 +122,8 @@ fn panel<DB: DrawingBackend>(
     }
 }
 
-fn font(size: u32) -> TextStyle<'static> {
+/// The embedded font at `size` [px], black.
+pub(crate) fn font(size: u32) -> TextStyle<'static> {
     (FAMILY, size).into_font().color(&BLACK)
 }
 

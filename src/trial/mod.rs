@@ -135,7 +135,7 @@ fn install_ctrl_c(stop: Arc<AtomicBool>) {
 }
 
 /// `YYYYmmdd-HHMMSS` (UTC) of the wall clock, for folder names only.
-fn wall_stamp() -> String {
+pub(crate) fn wall_stamp() -> String {
     let (y, m, d, hh, mm, ss) = utc_now();
     format!("{y:04}{m:02}{d:02}-{hh:02}{mm:02}{ss:02}")
 }

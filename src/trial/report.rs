@@ -16,17 +16,16 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 
 use anyhow::{Context, anyhow};
 use assess::Indicator;
 use plotters::coord::Shift;
 use plotters::prelude::*;
-use plotters::style::FontStyle;
 
 use super::events::TrialEvent;
 use super::log::summary::Summary;
 use super::log::{LogOptions, Recorded, TrialMeta};
+use crate::report::plot::{BLUE, GREEN, ORANGE, PURPLE, SKY, VERMILION, font, register_font};
 use assess_report::plot;
 
 /// The `hrc-adapt assess` outputs (`src/report`: the indicator table and figure), shared with
@@ -53,19 +52,9 @@ pub(crate) const ROBOT_PNG: &str = "report_robot.png";
 /// The handover timeline.
 pub(crate) const HANDOVERS_PNG: &str = "report_handovers.png";
 
-const FAMILY: &str = "sans-serif";
-// The same font as `report::plot`, registered under the same family (registration is
-// idempotent); plot.rs keeps its registration private.
-static FONT_BYTES: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
 const PX: (u32, u32) = (1400, 560);
 
-// Okabe–Ito, as `report::plot`.
-const BLUE: RGBColor = RGBColor(0, 114, 178);
-const ORANGE: RGBColor = RGBColor(230, 159, 0);
-const GREEN: RGBColor = RGBColor(0, 158, 115);
-const VERMILION: RGBColor = RGBColor(213, 94, 0);
-const PURPLE: RGBColor = RGBColor(204, 121, 167);
-const SKY: RGBColor = RGBColor(86, 180, 233);
+// Okabe–Ito, shared with `report::plot` (plus yellow and a lighter grey here).
 const YELLOW: RGBColor = RGBColor(240, 228, 66);
 const GREY: RGBColor = RGBColor(150, 150, 150);
 
@@ -79,19 +68,6 @@ fn indicator_colour(k: Option<Indicator>) -> RGBColor {
         Some(Indicator::Ohd) => PURPLE,
         None => RGBColor(215, 215, 215),
     }
-}
-
-fn register_font() -> anyhow::Result<()> {
-    static DONE: OnceLock<bool> = OnceLock::new();
-    let ok = *DONE.get_or_init(|| {
-        plotters::style::register_font(FAMILY, FontStyle::Normal, FONT_BYTES).is_ok()
-    });
-    anyhow::ensure!(ok, "the embedded font could not be loaded");
-    Ok(())
-}
-
-fn font(size: u32) -> TextStyle<'static> {
-    (FAMILY, size).into_font().color(&BLACK)
 }
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
