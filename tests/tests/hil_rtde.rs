@@ -838,10 +838,12 @@ async fn emulator_drops_a_client_that_stops_reading() {
         let emu = Emulator::start(cfg, Box::new(SimBackend::new(robot)))
             .await
             .unwrap();
-        // A hand-rolled client: set up a large recipe, start, then never read again.
-        let mut s = tokio::net::TcpStream::connect(emu.rtde_addr())
-            .await
-            .unwrap();
+        // A hand-rolled client: set up a large recipe, start, then never read again. A small
+        // receive buffer makes the stall show within a few packages, whatever the kernel's
+        // autotuned loopback buffers and however slowly a loaded machine runs the emulator.
+        let socket = tokio::net::TcpSocket::new_v4().unwrap();
+        socket.set_recv_buffer_size(4096).unwrap();
+        let mut s = socket.connect(emu.rtde_addr()).await.unwrap();
         let names = [
             "actual_q",
             "actual_qd",
@@ -865,6 +867,16 @@ async fn emulator_drops_a_client_that_stops_reading() {
         ClientPackage::Start.encode(&mut out).unwrap();
         s.write_all(&out).await.unwrap();
         let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+        // First the session must exist (the emulator accepts asynchronously: checking for 0
+        // before it registers would pass at once and leave the read loop below on a live
+        // stream), then it must be dropped.
+        while emu.rtde_sessions() == 0 {
+            assert!(
+                tokio::time::Instant::now() < deadline,
+                "the session never started"
+            );
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
         while emu.rtde_sessions() > 0 {
             assert!(
                 tokio::time::Instant::now() < deadline,
