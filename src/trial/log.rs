@@ -93,6 +93,11 @@ pub(crate) struct TrialMeta {
     pub(crate) seed: u64,
     /// The operator is simulated: the data is not from a person.
     pub(crate) simulated: bool,
+    /// Where the operator cues came from when not from the simulated operator:
+    /// `recorded:<file name>` (`hrc-adapt trial --cues`). Absent (not written) for the
+    /// simulated operator.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub(crate) cue_source: Option<String>,
     /// Wall-clock start, ISO 8601 UTC (`2026-01-01T12:00:00Z`).
     pub(crate) started_utc: String,
     /// The robot backend (`sim`, `emulator`, or the UR5e's address).

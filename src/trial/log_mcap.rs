@@ -69,7 +69,7 @@ pub(crate) const CHANNELS: [ChannelSpec; 9] = [
         schema_name: "hrc_adapt.TrialMeta",
         schema: schema!(
             "Trial identity",
-            r#"{"participant":{"type":"string"},"condition":{"type":"string"},"policy":{"type":"string"},"seed":{"type":"integer"},"simulated":{"type":"boolean"},"started_utc":{"type":"string"},"robot":{"type":"string"}}"#
+            r#"{"participant":{"type":"string"},"condition":{"type":"string"},"policy":{"type":"string"},"seed":{"type":"integer"},"simulated":{"type":"boolean"},"cue_source":{"type":"string"},"started_utc":{"type":"string"},"robot":{"type":"string"}}"#
         ),
     },
     ChannelSpec {

@@ -138,6 +138,9 @@ pub(crate) struct SummaryMeta {
     pub(crate) seed: u64,
     /// The operator is simulated.
     pub(crate) simulated: bool,
+    /// `recorded:<file name>` for a recorded cue file; absent for the simulated operator.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub(crate) cue_source: Option<String>,
     /// The robot backend.
     pub(crate) robot: String,
 }
@@ -150,6 +153,7 @@ impl SummaryMeta {
             policy: m.policy.clone(),
             seed: m.seed,
             simulated: m.simulated,
+            cue_source: m.cue_source.clone(),
             robot: m.robot.clone(),
         }
     }
@@ -443,6 +447,7 @@ mod tests {
             policy: "adaptive".into(),
             seed: 7,
             simulated: true,
+            cue_source: None,
             started_utc: "2026-01-01T00:00:00Z".into(),
             robot: "sim".into(),
         }

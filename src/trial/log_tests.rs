@@ -31,6 +31,7 @@ fn meta() -> TrialMeta {
         policy: "adaptive".into(),
         seed: 42,
         simulated: true,
+        cue_source: None,
         started_utc: "2026-01-01T00:00:00Z".into(),
         robot: "synthetic".into(),
     }

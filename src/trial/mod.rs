@@ -1,6 +1,9 @@
 //! `hrc-adapt trial`: one closed-loop adaptive handover trial (issue 5).
 //!
-//! - [`operator`]: the **simulated operator** (seeded stochastic gearbox-task model);
+//! - [`operator`]: the **simulated operator** (seeded stochastic gearbox-task model), the
+//!   default cue source;
+//! - `cues`: the cue sources; `--cues <file.csv>` replays a **recorded cue file** by time
+//!   (sample-and-hold, open loop: the recorded operator does not react to the robot);
 //! - [`runtime`]: cues → assessor (30 Hz) → policy → controller (500 Hz) → supervisor → robot
 //!   on a mock clock with `SimRobot` ([`runtime::run_simulated`], for the experiment runner
 //!   and the determinism test) or on the controller's clock over RTDE;
@@ -13,6 +16,7 @@
 
 mod backend;
 pub(crate) mod config;
+mod cues;
 mod events;
 mod log;
 pub(crate) mod operator;
@@ -54,6 +58,11 @@ pub(crate) struct TrialArgs {
     /// `--robot emulator`: controller cycles the emulator runs per 2 ms of wall time.
     #[arg(long, default_value_t = 4)]
     speedup: u32,
+    /// Replay this recorded cue CSV (the `assess::io::cue_csv` format) instead of the simulated
+    /// operator: sample-and-hold by time; the trial ends when the file ends ("cues_ended") or
+    /// the task completes. The recorded operator does not react to the robot.
+    #[arg(long)]
+    cues: Option<PathBuf>,
     /// Folder under which the run folder is created.
     #[arg(long, default_value = "runs")]
     out_root: PathBuf,
@@ -103,18 +112,30 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
     install_ctrl_c(stop.clone());
     let bar = runtime::progress_bar(true);
     let started = std::time::Instant::now();
-    let out = runtime::run_trial_with(&spec, &robot, &dir, &stop, &mut |l| {
+    let cues = args
+        .cues
+        .clone()
+        .map_or(cues::CueSource::Simulated, cues::CueSource::Recorded);
+    let out = runtime::run_trial_with_cues(&spec, &robot, &cues, &dir, &stop, &mut |l| {
         runtime::update_bar(&bar, l)
     })?;
     bar.finish_and_clear();
     if stop.load(Ordering::Relaxed) {
         eprintln!("interrupted: robot stopped, logs closed");
     }
-    eprintln!(
-        "[simulation] trial on {} finished in {:.1} s wall time",
-        args.robot,
-        started.elapsed().as_secs_f64()
-    );
+    match &args.cues {
+        None => eprintln!(
+            "[simulation] trial on {} finished in {:.1} s wall time",
+            args.robot,
+            started.elapsed().as_secs_f64()
+        ),
+        Some(p) => eprintln!(
+            "[recorded cues {}] trial on {} finished in {:.1} s wall time",
+            p.display(),
+            args.robot,
+            started.elapsed().as_secs_f64()
+        ),
+    }
     println!("{}", out.display());
     Ok(())
 }

@@ -807,6 +807,19 @@ th{{background:#f3f3f3}}img{{max-width:100%;border:1px solid #eee}}\
     if meta.simulated {
         h.push_str("<div class=\"sim\">SIMULATED TRIAL — simulated operator; no person took part. These data are not human measurements.</div>\n");
     }
+    if let Some(src) = &meta.cue_source {
+        let robot = match meta.robot.as_str() {
+            "sim" => "simulated (in-process)",
+            "emulator" => "emulated (controller emulator)",
+            _ => "real UR5e",
+        };
+        let _ = writeln!(
+            h,
+            "<div class=\"sim\">RECORDED CUES — operator cues replayed from {}; the recorded operator does not react to the robot. Robot: {}.</div>",
+            esc(src),
+            esc(robot)
+        );
+    }
     let _ = writeln!(h, "<h1>{}</h1>", esc(&title));
     let _ = writeln!(h, "<table>");
     for (k, v) in [
@@ -815,6 +828,12 @@ th{{background:#f3f3f3}}img{{max-width:100%;border:1px solid #eee}}\
         ("policy", meta.policy.clone()),
         ("seed", meta.seed.to_string()),
         ("simulated", meta.simulated.to_string()),
+        (
+            "cue source",
+            meta.cue_source
+                .clone()
+                .unwrap_or_else(|| "simulated operator".into()),
+        ),
         ("robot", meta.robot.clone()),
         ("started (UTC)", meta.started_utc.clone()),
         ("completion time", format!("{:.3} s", s.completion_time_s)),

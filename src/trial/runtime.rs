@@ -25,6 +25,7 @@ use robot_io::{JointCommand, Robot, RobotState};
 use safety::{Supervisor, SupervisorConfig, Verdict, WorldView};
 
 use super::config::TrialConfig;
+use super::cues::{CueSource, RecordedCues};
 use super::events::TrialEvent;
 use super::log::{LogOptions, TrialLog, TrialMeta};
 use super::operator::{Level, RobotView, SimulatedOperator};
@@ -221,8 +222,10 @@ pub(crate) fn run_simulated_with(
     run_trial_with(spec, &RobotChoice::Sim, out_dir, stop, progress)
 }
 
-/// Run one trial on `robot` (see [`run_simulated_with`]). `Sim` runs on the mock clock;
-/// the RTDE robots run paced on the controller's timestamps (`backend.rs`).
+/// Run one trial on `robot` with the simulated operator (see [`run_simulated_with`]). `Sim`
+/// runs on the mock clock; the RTDE robots run paced on the controller's timestamps
+/// (`backend.rs`).
+#[allow(dead_code)] // the emulator test and the experiment runner's path
 pub(crate) fn run_trial_with(
     spec: &TrialSpec,
     robot: &RobotChoice,
@@ -230,7 +233,24 @@ pub(crate) fn run_trial_with(
     stop: &AtomicBool,
     progress: &mut dyn FnMut(&Live),
 ) -> anyhow::Result<PathBuf> {
+    run_trial_with_cues(spec, robot, &CueSource::Simulated, out_dir, stop, progress)
+}
+
+/// Run one trial on `robot` with its cues from `cues` (see [`run_trial_with`] and the `cues`
+/// module: a recorded file is replayed by time, sample-and-hold).
+pub(crate) fn run_trial_with_cues(
+    spec: &TrialSpec,
+    robot: &RobotChoice,
+    cues: &CueSource,
+    out_dir: &Path,
+    stop: &AtomicBool,
+    progress: &mut dyn FnMut(&Live),
+) -> anyhow::Result<PathBuf> {
     let cfg = &spec.config;
+    let recorded = match cues {
+        CueSource::Simulated => None,
+        CueSource::Recorded(p) => Some(RecordedCues::load(p)?),
+    };
     let workspace = Workspace::from_toml_file(&cfg.workspace)
         .with_context(|| format!("workspace {}", cfg.workspace.display()))?;
     let assess_cfg = match &cfg.assess {
@@ -249,6 +269,7 @@ pub(crate) fn run_trial_with(
         assess_cfg,
         ctl_cfg,
         table,
+        recorded,
     };
     let home = setup.ctl_cfg.task.home_q_rad;
     match robot {
@@ -308,6 +329,8 @@ struct Setup {
     assess_cfg: AssessConfig,
     ctl_cfg: ControllerConfig,
     table: RuleTable,
+    /// The recorded cue file replayed instead of the simulated operator's cues.
+    recorded: Option<RecordedCues>,
 }
 
 /// The trial loop on any robot.
@@ -328,6 +351,7 @@ fn drive<R: Robot>(
         assess_cfg,
         ctl_cfg,
         table,
+        mut recorded,
     } = setup;
     let mut policy = spec.policy.build(&table);
     let mut assessor = Assessor::new(workspace.clone(), assess_cfg.clone())?;
@@ -339,7 +363,9 @@ fn drive<R: Robot>(
         condition: spec.condition.as_str().to_owned(),
         policy: spec.policy.as_str().to_owned(),
         seed: spec.seed,
-        simulated: true,
+        // A recorded operator is not simulated (the robot may still be: see `robot`).
+        simulated: recorded.is_none(),
+        cue_source: recorded.as_ref().map(|r| r.label().to_owned()),
         // Wall clock: only in trial.mcap's /trial/meta and the report, never in summary.json.
         started_utc: super::utc_now_iso(),
         robot: robot_label.to_owned(),
@@ -447,10 +473,22 @@ fn drive<R: Robot>(
                 tcp_peak_acc_m_s2: peak_acc,
             };
             peak_acc = 0.0;
-            operator.step(tc, &view, &mut frame);
-            for e in operator.events() {
-                log.event(tc, e)?;
-            }
+            let cue_t = match recorded.as_mut() {
+                None => {
+                    operator.step(tc, &view, &mut frame);
+                    for e in operator.events() {
+                        log.event(tc, e)?;
+                    }
+                    tc
+                }
+                Some(r) => {
+                    if r.ended(tc) {
+                        reason = "cues_ended";
+                        break;
+                    }
+                    r.hold(tc, &mut frame)
+                }
+            };
             frame.robot = RobotContext {
                 collaborating: controller.collaborating(),
                 incomplete: controller.incomplete(),
@@ -490,13 +528,18 @@ fn drive<R: Robot>(
             humans.head_m = frame.head.as_ref().map(|h| to_base(&h.position));
             humans.left_hand_m = frame.hands[0].as_ref().map(|h| to_base(&h.position));
             humans.right_hand_m = frame.hands[1].as_ref().map(|h| to_base(&h.position));
-            last_cue_t = tc;
+            // A held recorded frame is as old as its file time.
+            last_cue_t = cue_t;
             live.t_s = tc;
             live.hrc_cwl = a.windowed.hrc_cwl;
             live.dominant = policies::indicator_key(a.dominant.indicator);
             live.handovers_done = done;
             progress(&live);
-            if operator.finished() {
+            let finished = match recorded {
+                None => operator.finished(),
+                Some(_) => done >= n_handovers,
+            };
+            if finished {
                 reason = "completed";
                 break;
             }
@@ -539,9 +582,13 @@ fn drive<R: Robot>(
                     log.event(t, &TrialEvent::PartReturned { handover: started })?
                 }
                 TaskEventKind::ReleaseConfirmed => {
-                    operator.release_confirmed();
-                    for e in operator.events() {
-                        log.event(t, e)?;
+                    if recorded.is_none() {
+                        operator.release_confirmed();
+                        for e in operator.events() {
+                            log.event(t, e)?;
+                        }
+                    } else {
+                        log.event(t, &TrialEvent::Grasped { handover: done + 1 })?;
                     }
                     done += 1;
                 }
@@ -747,6 +794,80 @@ mod tests {
             .lines()
             .count();
         assert!((150..=200).contains(&rows), "{rows} indicator rows");
+    }
+
+    #[test]
+    fn recorded_cue_file_drives_a_sim_trial_until_the_file_ends() {
+        // 6 s at 30 Hz of an operator seated at the origin who looks at and works in the
+        // assembly area (centre (0.55, 0, 0.8) m); the collaborating/incomplete columns say 1
+        // and must be ignored (the robot context comes from the live task).
+        let dir = tempfile::tempdir().unwrap();
+        let csv = dir.path().join("assembly-gaze.csv");
+        let mut text = String::from(
+            "# recorded operator looking at the assembly fixture\n\
+             t,head_x,head_y,head_z,head_fx,head_fy,head_fz,head_conf,\
+             body_x,body_y,body_z,body_fx,body_fy,body_fz,body_conf,\
+             rhand_x,rhand_y,rhand_z,rhand_conf,collaborating,incomplete\n",
+        );
+        for n in 0..=180 {
+            let t = 100.0 + f64::from(n) / 30.0; // file times need not start at 0
+            let wiggle = 0.01 * (f64::from(n) * 0.7).sin();
+            text.push_str(&format!(
+                "{t:.6},0,0,1.2,0.55,{wiggle:.4},-0.4,0.9,0,0,1.0,1,0,0,0.9,0.5,{:.4},0.8,0.9,1,1\n",
+                0.05 + wiggle
+            ));
+        }
+        std::fs::write(&csv, text).unwrap();
+        let out_root = tempfile::tempdir().unwrap();
+        let stop = AtomicBool::new(false);
+        let mut s = spec(5, 60.0);
+        s.condition = Level::L1;
+        let out = run_trial_with_cues(
+            &s,
+            &RobotChoice::Sim,
+            &CueSource::Recorded(csv),
+            out_root.path(),
+            &stop,
+            &mut |_| {},
+        )
+        .unwrap();
+        for f in [
+            "trial.mcap",
+            "indicators.csv",
+            "robot.csv",
+            "summary.json",
+            "report.html",
+        ] {
+            assert!(out.join(f).is_file(), "{f} missing");
+        }
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+        assert_eq!(summary["meta"]["cue_source"], "recorded:assembly-gaze.csv");
+        assert_eq!(summary["meta"]["simulated"], false);
+        assert_eq!(summary["meta"]["robot"], "sim");
+        assert_eq!(summary["finish_reason"], "cues_ended", "{summary}");
+        let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+        assert!(report.contains("RECORDED CUES"), "report not labelled");
+        assert!(report.contains("does not react to the robot"));
+        // The assessment saw the recorded gaze: after the confirmation delay, the confirmed
+        // area is the assembly area on (nearly) every frame.
+        let ind = std::fs::read_to_string(out.join("indicators.csv")).unwrap();
+        let mut lines = ind.lines().filter(|l| !l.starts_with('#'));
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let col = header.iter().position(|h| *h == "F").unwrap(); // the confirmed area
+        let confirmed: Vec<String> = lines
+            .map(|l| l.split(',').nth(col).unwrap().to_owned())
+            .collect();
+        assert!(
+            (170..=185).contains(&confirmed.len()),
+            "{} assessments for a 6 s file",
+            confirmed.len()
+        );
+        let late = &confirmed[confirmed.len() / 2..];
+        assert!(
+            late.iter().all(|c| c == "assembly"),
+            "confirmed areas: {late:?}"
+        );
     }
 
     #[test]
