@@ -12,9 +12,14 @@
 //!    (error or panic) is recorded and the experiment goes on.
 //! 4. Reads the trial folders' `summary.json` ([`aggregate`]), computes the statistics and writes
 //!    `experiment_summary.json` and the self-contained `experiment_report.html` ([`report`]).
+//!
+//! With `--participant P03 --robot <ip|emulator>` it instead guides one participant's real
+//! session, trial by trial, with start / pause / skip / quit prompts and the NASA-TLX ratings
+//! after each trial ([`session`]).
 
 pub(crate) mod aggregate;
 pub(crate) mod report;
+pub(crate) mod session;
 
 use std::collections::VecDeque;
 use std::io::IsTerminal as _;
@@ -41,6 +46,17 @@ pub(crate) struct ExperimentArgs {
     /// Trials run in parallel (default: the available cores).
     #[arg(long)]
     jobs: Option<usize>,
+    /// Guide this participant's real session (their schedule rows, trial by trial, with
+    /// prompts and NASA-TLX) instead of running the simulated experiment.
+    #[arg(long)]
+    participant: Option<String>,
+    /// Real session: the robot, `emulator` (in-process controller emulator over loopback RTDE),
+    /// `sim` (in-process, for a rehearsal) or a UR5e's address.
+    #[arg(long, requires = "participant")]
+    robot: Option<String>,
+    /// Real session with `--robot emulator`: controller cycles per 2 ms of wall time.
+    #[arg(long, default_value_t = 4, requires = "participant")]
+    speedup: u32,
 }
 
 /// The experiment file (every key is documented in `config/experiment-ab.toml`).
@@ -284,6 +300,9 @@ fn run_one(trial: PlannedTrial, trial_config: &TrialConfig, dir: &Path) -> Trial
 
 /// Runs `hrc-adapt experiment`.
 pub(crate) fn run(args: ExperimentArgs) -> anyhow::Result<()> {
+    if let Some(participant) = &args.participant {
+        return run_real_session(&args, participant);
+    }
     let jobs = args.jobs.unwrap_or_else(|| {
         std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
     });
@@ -299,6 +318,124 @@ pub(crate) fn run(args: ExperimentArgs) -> anyhow::Result<()> {
     );
     println!("{}", out.report.display());
     Ok(())
+}
+
+/// The schedule rows of `participant` (e.g. `P03`) in the experiment file's design.
+pub(crate) fn participant_trials(
+    cfg: &ExperimentConfig,
+    participant: &str,
+) -> anyhow::Result<Vec<PlannedTrial>> {
+    let schedule = cfg.design().schedule().context("invalid design")?;
+    let sessions = plan(&schedule, cfg.seed)?;
+    let known: Vec<&str> = schedule
+        .sessions
+        .iter()
+        .map(|s| s.participant.as_str())
+        .collect();
+    sessions
+        .into_iter()
+        .find(|s| s.first().is_some_and(|t| t.participant == participant))
+        .with_context(|| {
+            format!(
+                "participant {participant} is not in the schedule ({})",
+                known.join(", ")
+            )
+        })
+}
+
+/// `hrc-adapt experiment --participant P03 --robot …`: the guided real session of one
+/// participant into `<out-root>/<timestamp>-session-P03/` ([`session`]).
+fn run_real_session(args: &ExperimentArgs, participant: &str) -> anyhow::Result<()> {
+    use crate::trial::runtime::{self, RobotChoice};
+    let cfg = ExperimentConfig::from_file(&args.config)?;
+    let trial_config = TrialConfig::from_file(&cfg.trial_config)?;
+    let trials = participant_trials(&cfg, participant)
+        .with_context(|| format!("{}", args.config.display()))?;
+    let robot_name = args.robot.clone().unwrap_or_else(|| "emulator".into());
+    let robot = match robot_name.as_str() {
+        "sim" => RobotChoice::Sim,
+        "emulator" => RobotChoice::Emulator {
+            speedup: args.speedup,
+        },
+        host => RobotChoice::Ur(host.to_owned()),
+    };
+    let dir = args.out_root.join(format!(
+        "{}-session-{participant}",
+        crate::trial::wall_stamp()
+    ));
+    anyhow::ensure!(!dir.exists(), "{} exists already", dir.display());
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    write_schedule(&dir.join("schedule.csv"), std::slice::from_ref(&trials))?;
+    eprintln!(
+        "session of {participant} on {robot_name}: {} trials, folder {}",
+        trials.len(),
+        dir.display()
+    );
+    // Trial logs: errors and the trial's own warnings only, as `hrc-adapt trial` does.
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| "error,hrc_adapt=warn".into());
+    let _log = tracing::subscriber::set_default(
+        tracing_subscriber::fmt()
+            .with_env_filter(filter)
+            .with_writer(std::io::stderr)
+            .finish(),
+    );
+    // Ctrl-C during a trial stops that trial through the supervisor (the flag is cleared
+    // before each trial); at a prompt, answer `quit`.
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    install_ctrl_c(stop.clone());
+    let show = std::io::stderr().is_terminal();
+    let mut run_trial = |t: &PlannedTrial, out: &Path| -> anyhow::Result<PathBuf> {
+        stop.store(false, std::sync::atomic::Ordering::Relaxed);
+        let spec = TrialSpec {
+            participant: t.participant.clone(),
+            condition: t.condition.as_str().parse()?,
+            policy: t.policy,
+            seed: t.seed,
+            config: trial_config.clone(),
+        };
+        let bar = runtime::progress_bar(show);
+        let result = runtime::run_trial_with(&spec, &robot, out, &stop, &mut |l| {
+            runtime::update_bar(&bar, l)
+        });
+        bar.finish_and_clear();
+        if stop.load(std::sync::atomic::Ordering::Relaxed) {
+            eprintln!("interrupted: robot stopped, logs closed");
+        }
+        result
+    };
+    // Not a held `stdin().lock()`: the UR5e backend reads its own confirmation from stdin.
+    let mut input = std::io::BufReader::new(std::io::stdin());
+    let record = session::run_session(
+        &trials,
+        &dir,
+        &mut input,
+        &mut std::io::stdout(),
+        &mut run_trial,
+    )?;
+    if record.quit {
+        eprintln!(
+            "session quit early; everything entered is in {}",
+            dir.display()
+        );
+    }
+    println!("{}", dir.display());
+    Ok(())
+}
+
+/// Sets `stop` on Ctrl-C (a small thread with a current-thread tokio runtime).
+fn install_ctrl_c(stop: Arc<std::sync::atomic::AtomicBool>) {
+    std::thread::spawn(move || {
+        let Ok(rt) = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+        else {
+            return;
+        };
+        while rt.block_on(tokio::signal::ctrl_c()).is_ok() {
+            stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    });
 }
 
 /// What [`run_experiment`] did.

@@ -159,3 +159,126 @@ fn trial_seeds_differ_and_are_reproducible() {
     assert_eq!(trial_seed(2026, 3, 4), trial_seed(2026, 3, 4));
     assert_ne!(trial_seed(2026, 3, 4), trial_seed(2027, 3, 4));
 }
+
+/// A participant's six planned trials (3 conditions × 2 policies).
+fn six_trials() -> Vec<PlannedTrial> {
+    let schedule = ExperimentDesign {
+        participants: 2,
+        conditions: Condition::ALL.to_vec(),
+        policies: vec!["adaptive".into(), "fixed".into()],
+        seed: 5,
+    }
+    .schedule()
+    .unwrap();
+    plan(&schedule, 5).unwrap().remove(1)
+}
+
+#[test]
+fn guided_session_follows_the_script_and_appends_the_ratings() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let trials = six_trials();
+    assert_eq!(trials.len(), 6);
+    let script = concat!(
+        // Trial 1: start; physical demand is asked again after "25" and "abc".
+        "start\n", "10\n", "25\n", "abc\n", "5\n", "15\n", "20\n", "0\n", "10\n",
+        // Trial 2: an unknown answer, a pause (Enter resumes), then skip.
+        "bogus\n", "pause\n", "\n", "skip\n",
+        // Trial 3: start, but the runner fails: no ratings.
+        "start\n", // Trial 4: start and six ratings.
+        "START\n", "1\n", "2\n", "3\n", "4\n", "5\n", "6\n", // Trial 5: quit.
+        "quit\n",
+    );
+    let mut input = std::io::Cursor::new(script.as_bytes());
+    let mut out = Vec::new();
+    let mut ran = Vec::new();
+    let record = session::run_session(&trials, dir, &mut input, &mut out, &mut |t, folder| {
+        ran.push(t.position);
+        assert_eq!(folder, dir.join(&t.folder));
+        anyhow::ensure!(t.position != 3, "robot not in remote control");
+        Ok(folder.to_path_buf())
+    })
+    .unwrap();
+    let out = String::from_utf8(out).unwrap();
+    assert_eq!(ran, [1, 3, 4], "{out}");
+    assert!(record.quit);
+    use session::StepOutcome as S;
+    let outcomes: Vec<_> = record.steps.iter().map(|(_, o)| o.clone()).collect();
+    assert_eq!(
+        outcomes,
+        [
+            S::Done { raw_tlx: 10.0 },
+            S::Skipped,
+            S::Failed("robot not in remote control".into()),
+            S::Done { raw_tlx: 3.5 },
+        ]
+    );
+    assert_eq!(record.steps[1].0, trials[1].folder);
+    assert!(out.contains(&format!(
+        "Next: trial 1 of 6 for P02: condition {}, policy {}",
+        trials[0].condition, trials[0].policy
+    )));
+    assert!(out.contains("trial 5 of 6"), "{out}");
+    assert!(!out.contains("trial 6 of 6"), "{out}");
+    assert_eq!(out.matches("is not a rating").count(), 2, "{out}");
+    // Three times in trial 1 (two bad answers), once in trial 4.
+    assert_eq!(out.matches("Physical demand (0-20)").count(), 4, "{out}");
+    assert!(out.contains("unknown answer \"bogus\""), "{out}");
+    assert!(out.contains("paused; press Enter"), "{out}");
+    assert!(out.contains("trial 3 of 6 failed: robot not in remote control"));
+    assert!(
+        out.contains("2 done, 1 failed, 1 skipped, 2 not reached"),
+        "{out}"
+    );
+
+    let csv_path = dir.join(session::TLX_FILE);
+    let text = std::fs::read_to_string(&csv_path).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(
+        lines[0],
+        "participant,trial,condition,policy,mental,physical,temporal,performance,effort,\
+         frustration,raw_tlx"
+    );
+    let row = |t: &PlannedTrial, ratings: &str, raw: &str| {
+        format!(
+            "P02,{},{},{},{ratings},{raw}",
+            t.position, t.condition, t.policy
+        )
+    };
+    assert_eq!(lines[1], row(&trials[0], "10,5,15,20,0,10", "10.0000"));
+    assert_eq!(lines[2], row(&trials[3], "1,2,3,4,5,6", "3.5000"));
+    assert_eq!(lines.len(), 3);
+
+    // Resuming later appends to the same file, without a second header; input ending in the
+    // middle of the ratings writes nothing for that trial.
+    let mut input = std::io::Cursor::new(&b"start\n7.5\n7.5\n7.5\n7.5\n7.5\n7.5\nstart\n1\n"[..]);
+    let mut out = Vec::new();
+    let record = session::run_session(&trials[4..], dir, &mut input, &mut out, &mut |_, f| {
+        Ok(f.to_path_buf())
+    })
+    .unwrap();
+    assert!(record.quit);
+    assert_eq!(record.steps.len(), 1);
+    let text = std::fs::read_to_string(&csv_path).unwrap();
+    assert_eq!(text.lines().count(), 4, "{text}");
+    assert_eq!(text.matches("participant,").count(), 1);
+    assert!(text.ends_with(&format!(
+        "{}\n",
+        row(&trials[4], "7.5,7.5,7.5,7.5,7.5,7.5", "7.5000")
+    )));
+}
+
+#[test]
+fn a_real_session_runs_the_participants_schedule_rows() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/experiment-ab.toml");
+    let cfg = ExperimentConfig::from_file(&path).unwrap();
+    let trials = participant_trials(&cfg, "P03").unwrap();
+    let schedule = plan(&cfg.design().schedule().unwrap(), cfg.seed).unwrap();
+    assert_eq!(trials.len(), 6);
+    assert_eq!(
+        trials.iter().map(|t| &t.folder).collect::<Vec<_>>(),
+        schedule[2].iter().map(|t| &t.folder).collect::<Vec<_>>()
+    );
+    let err = format!("{:#}", participant_trials(&cfg, "P09").unwrap_err());
+    assert!(err.contains("P09 is not in the schedule"), "{err}");
+}
