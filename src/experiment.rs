@@ -383,7 +383,7 @@ fn run_real_session(args: &ExperimentArgs, participant: &str) -> anyhow::Result<
     // Ctrl-C during a trial stops that trial through the supervisor (the flag is cleared
     // before each trial); at a prompt, answer `quit`.
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
-    install_ctrl_c(stop.clone());
+    crate::trial::install_ctrl_c(stop.clone());
     let show = std::io::stderr().is_terminal();
     let mut run_trial = |t: &PlannedTrial, out: &Path| -> anyhow::Result<PathBuf> {
         stop.store(false, std::sync::atomic::Ordering::Relaxed);
@@ -421,21 +421,6 @@ fn run_real_session(args: &ExperimentArgs, participant: &str) -> anyhow::Result<
     }
     println!("{}", dir.display());
     Ok(())
-}
-
-/// Sets `stop` on Ctrl-C (a small thread with a current-thread tokio runtime).
-fn install_ctrl_c(stop: Arc<std::sync::atomic::AtomicBool>) {
-    std::thread::spawn(move || {
-        let Ok(rt) = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-        else {
-            return;
-        };
-        while rt.block_on(tokio::signal::ctrl_c()).is_ok() {
-            stop.store(true, std::sync::atomic::Ordering::Relaxed);
-        }
-    });
 }
 
 /// What [`run_experiment`] did.

@@ -140,8 +140,8 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Sets `stop` on Ctrl-C (a small thread with a current-thread tokio runtime).
-fn install_ctrl_c(stop: Arc<AtomicBool>) {
+/// Sets `stop` on every Ctrl-C (a small thread with a current-thread tokio runtime).
+pub(crate) fn install_ctrl_c(stop: Arc<AtomicBool>) {
     std::thread::spawn(move || {
         let Ok(rt) = tokio::runtime::Builder::new_current_thread()
             .enable_all()
@@ -149,7 +149,7 @@ fn install_ctrl_c(stop: Arc<AtomicBool>) {
         else {
             return;
         };
-        if rt.block_on(tokio::signal::ctrl_c()).is_ok() {
+        while rt.block_on(tokio::signal::ctrl_c()).is_ok() {
             stop.store(true, Ordering::Relaxed);
         }
     });

@@ -733,6 +733,19 @@ mod tests {
         }
     }
 
+    /// Every file a trial leaves (ARCHITECTURE.md, "Files a trial leaves").
+    fn assert_trial_files(out: &Path) {
+        for f in [
+            "trial.mcap",
+            "indicators.csv",
+            "robot.csv",
+            "summary.json",
+            "report.html",
+        ] {
+            assert!(out.join(f).is_file(), "{f} missing");
+        }
+    }
+
     #[test]
     fn safety_events_are_debounced_pair_changes() {
         let stop = ("stopped", "SAF-REQ-007");
@@ -777,15 +790,7 @@ mod tests {
             &mut |_| {},
         )
         .unwrap();
-        for f in [
-            "trial.mcap",
-            "indicators.csv",
-            "robot.csv",
-            "summary.json",
-            "report.html",
-        ] {
-            assert!(out.join(f).is_file(), "{f} missing");
-        }
+        assert_trial_files(&out);
         let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
         assert!(summary.contains("\"robot\": \"emulator\""), "{summary}");
         // Paced on the controller clock: about 6 s of trial time were assessed at 30 Hz.
@@ -831,15 +836,7 @@ mod tests {
             &mut |_| {},
         )
         .unwrap();
-        for f in [
-            "trial.mcap",
-            "indicators.csv",
-            "robot.csv",
-            "summary.json",
-            "report.html",
-        ] {
-            assert!(out.join(f).is_file(), "{f} missing");
-        }
+        assert_trial_files(&out);
         let summary: serde_json::Value =
             serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
         assert_eq!(summary["meta"]["cue_source"], "recorded:assembly-gaze.csv");
