@@ -139,7 +139,7 @@ fn assess(args: &AssessArgs) -> anyhow::Result<Report> {
     };
     let plots = plot::render(staging.path(), &figure)?;
     let config_path = staging.path().join(CONFIG_FILE);
-    fs::write(&config_path, cfg.to_toml_string())
+    fs::write(&config_path, cfg.to_toml_string()?)
         .with_context(|| format!("cannot write {}", config_path.display()))?;
 
     let mut files = vec![args.out.join(TABLE_FILE)];

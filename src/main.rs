@@ -57,7 +57,7 @@ fn main() -> anyhow::Result<()> {
         Command::Experiment(args) => experiment::run(args),
         Command::Config(args) => {
             anyhow::ensure!(args.print_default, "nothing to do: pass --print-default");
-            print!("{}", assess::AssessConfig::default().to_toml_string());
+            print!("{}", assess::AssessConfig::default().to_toml_string()?);
             Ok(())
         }
     }

@@ -315,7 +315,8 @@ impl Assessor {
         let mut switch_cost = None;
         if let Some(b) = f {
             if let Some(a) = self.last_area {
-                if a != b && f != prev_f {
+                // a ≠ b implies a change: last_area equals F(t−1) whenever F(t−1) is an area.
+                if a != b {
                     switch_cost = Some(self.cost[a.0 * self.ws.len() + b.0]);
                 }
             }

@@ -345,8 +345,11 @@ impl AssessConfig {
     }
 
     /// The configuration as TOML, every key with its value.
-    pub fn to_toml_string(&self) -> String {
-        toml::to_string_pretty(self).unwrap_or_default()
+    pub fn to_toml_string(&self) -> Result<String> {
+        toml::to_string_pretty(self).map_err(|e| AssessError::Serialize {
+            what: "assessment configuration",
+            message: e.to_string(),
+        })
     }
 
     /// Checks every rule; the error names the key and the rule.

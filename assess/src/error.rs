@@ -51,6 +51,14 @@ pub enum AssessError {
         /// The underlying error.
         source: std::io::Error,
     },
+    /// A value could not be written as TOML.
+    #[error("cannot write the {what} as toml: {message}")]
+    Serialize {
+        /// What was being written.
+        what: &'static str,
+        /// The serializer's message.
+        message: String,
+    },
 }
 
 /// Result alias of this crate.
