@@ -59,6 +59,30 @@ pub enum AssessError {
         /// The serializer's message.
         message: String,
     },
+    /// A model file, or the ONNX Runtime library, could not be loaded or run.
+    #[error("model {}: {message}", path.display())]
+    Model {
+        /// The model (or runtime library) file.
+        path: PathBuf,
+        /// What failed, with the runtime's message.
+        message: String,
+    },
+    /// A frame source (camera, `.bag`, video, image folder) failed.
+    #[error("{source_name}: {message}")]
+    Source {
+        /// The source as the user named it (device serial, file path).
+        source_name: String,
+        /// What failed.
+        message: String,
+    },
+    /// An image-processing or calibration step failed.
+    #[error("{operation}: {message}")]
+    Vision {
+        /// The step ("warp", "solvePnP", "ArUco detection", ...).
+        operation: &'static str,
+        /// What failed.
+        message: String,
+    },
 }
 
 /// Result alias of this crate.

@@ -60,6 +60,8 @@ pub mod evidence;
 pub mod filter;
 mod hesitation;
 pub mod io;
+#[cfg(feature = "vision")]
+pub mod vision;
 mod window;
 
 pub use area::{Area, AreaBox, AreaId, AreaRole, Workspace};
