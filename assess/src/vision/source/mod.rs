@@ -17,3 +17,8 @@ pub trait FrameSource {
     /// Whether frames carry depth (false: cues are 2-D-only, see `CueQuality`).
     fn has_depth(&self) -> bool;
 }
+
+pub mod capture;
+pub mod folder;
+#[cfg(feature = "realsense")]
+pub mod realsense;
