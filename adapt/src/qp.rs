@@ -494,11 +494,12 @@ pub fn project_box_halfspace(
             if aj.abs() > 0.0 {
                 for bound in [l, h] {
                     let tb = (cj - bound) / aj;
-                    if tb > 0.0 && tb < lambda_max {
-                        if let Some(slot) = bp.get_mut(nbp) {
-                            *slot = tb;
-                            nbp += 1;
-                        }
+                    if tb > 0.0
+                        && tb < lambda_max
+                        && let Some(slot) = bp.get_mut(nbp)
+                    {
+                        *slot = tb;
+                        nbp += 1;
                     }
                 }
             }

@@ -356,10 +356,8 @@ impl Assessor {
             self.run_ns = 0;
             self.run_counting = false;
         }
-        if c {
-            if let Some(v) = speed {
-                self.samples.push(t, v, dt_ns);
-            }
+        if c && let Some(v) = speed {
+            self.samples.push(t, v, dt_ns);
         }
 
         // --- §4 integrals, cumulative and windowed ---

@@ -302,13 +302,13 @@ fn validate(opts: &KthOptions) -> Result<()> {
     positive("kth.reach_speed_m_s", opts.reach_speed_m_s)?;
     positive("kth.grasp_force_n", opts.grasp_force_n)?;
     positive("kth.release_force_n", opts.release_force_n)?;
-    if let Some((a, b)) = opts.collaboration_s {
-        if !(a.is_finite() && b.is_finite()) {
-            return Err(AssessError::invalid(
-                "kth.collaboration_s",
-                format!("must be finite (got [{a}, {b}))"),
-            ));
-        }
+    if let Some((a, b)) = opts.collaboration_s
+        && !(a.is_finite() && b.is_finite())
+    {
+        return Err(AssessError::invalid(
+            "kth.collaboration_s",
+            format!("must be finite (got [{a}, {b}))"),
+        ));
     }
     Ok(())
 }

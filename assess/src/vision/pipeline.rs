@@ -1,1 +1,911 @@
-//! (in progress)
+//! The landmark pipeline: pose (33), face mesh (468) and hands (21 each) for one person, the
+//! operator, with ROI tracking between frames.
+//!
+//! Per model, as in MediaPipe's graphs:
+//! - **detectors** (pose, face, palm) see the whole image letterboxed to their input, give SSD
+//!   boxes with keypoints (decoded, weighted NMS, letterbox removed);
+//! - a detection becomes a rotated ROI; **landmark models** see that ROI cropped to their
+//!   input, and their landmarks are projected back to the image;
+//! - in [`Mode::Tracking`] the next frame's ROIs come from this frame's landmarks, so the
+//!   detectors run only when a landmark model reports its target lost. Hand ROIs come from the
+//!   previous hand landmarks, else from the pose's wrist, index and pinky points, and only
+//!   then from palm detection. Models can run at staggered rates (`face_every`,
+//!   `hand_every`): a skipped model keeps its last landmarks.
+//! - in [`Mode::Static`] every frame is independent (MediaPipe's `static_image_mode`): this is
+//!   what the photo tests compare against the official mediapipe 0.10.21 output.
+//!
+//! The pipeline is single-person. Where several people are in view the operator is the
+//! nearest one (median depth in the detection box) or, without depth, the one with the
+//! largest detection box; face and hands are then taken from that person.
+
+use std::path::Path;
+use std::time::Instant;
+
+use super::anchors::{self, Anchor, AnchorOptions};
+use super::detect::{self, DecodeOptions, Detection};
+use super::frame::{DepthImage, RgbImage};
+use super::landmarks::{FaceLandmarks, HandLandmarks, Landmark, Landmarks, PoseLandmarks};
+use super::models::Model;
+use super::roi::{
+    self, Border, CropBuffer, NormRect, RectTransform, crop_to_tensor, rect_from_alignment,
+    rect_from_box,
+};
+use crate::{AssessError, Result};
+
+/// Model variants: MediaPipe's "full" models, or the "lite" ones (faster, less accurate) for
+/// pose and hands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Variant {
+    /// pose_landmark_full, palm_detection_full, hand_landmark_full.
+    Full,
+    /// pose_landmark_lite, palm_detection_lite, hand_landmark_lite.
+    Lite,
+}
+
+/// How frames relate to each other.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// Every frame is independent: all detectors run on every frame.
+    Static,
+    /// Video: ROIs are tracked from frame to frame; detectors run when tracking is lost.
+    Tracking,
+}
+
+/// Pipeline settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PipelineConfig {
+    /// Model variant for pose and hands (the face models have one variant).
+    pub variant: Variant,
+    /// Static images or tracking.
+    pub mode: Mode,
+    /// Minimum detector score [-] (MediaPipe's `min_detection_confidence`, default 0.5).
+    pub min_detection_score: f32,
+    /// Minimum landmark-model presence score to keep tracking [-] (MediaPipe's
+    /// `min_tracking_confidence`, default 0.5).
+    pub min_presence_score: f32,
+    /// Whether to find hands.
+    pub hands: bool,
+    /// Whether to find the face mesh.
+    pub face: bool,
+    /// Run the face landmark model on every n-th frame while tracking (1 = every frame).
+    pub face_every: u32,
+    /// Run each hand's landmark model on every n-th frame while tracking, the two hands on
+    /// alternating frames when 2 (1 = every frame).
+    pub hand_every: u32,
+    /// While a hand is lost and the pose gives no usable wrist, run palm detection on every
+    /// n-th frame.
+    pub palm_every: u32,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> Self {
+        Self {
+            variant: Variant::Full,
+            mode: Mode::Tracking,
+            min_detection_score: 0.5,
+            min_presence_score: 0.5,
+            hands: true,
+            face: true,
+            face_every: 1,
+            hand_every: 1,
+            palm_every: 3,
+        }
+    }
+}
+
+impl PipelineConfig {
+    /// MediaPipe's static-image settings (full models, detectors on every frame).
+    pub fn static_images() -> Self {
+        Self {
+            mode: Mode::Static,
+            ..Self::default()
+        }
+    }
+}
+
+/// Wall time of each stage on the last frame [µs]; 0 for a stage that did not run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StageTimes {
+    /// Pose detection [µs].
+    pub pose_detection_us: u64,
+    /// Pose landmarks [µs].
+    pub pose_landmarks_us: u64,
+    /// Face detection [µs].
+    pub face_detection_us: u64,
+    /// Face landmarks [µs].
+    pub face_landmarks_us: u64,
+    /// Palm detection [µs].
+    pub palm_detection_us: u64,
+    /// Hand landmarks, both hands [µs].
+    pub hand_landmarks_us: u64,
+    /// The whole frame [µs].
+    pub total_us: u64,
+}
+
+/// Sigmoid.
+fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+fn micros(since: Instant) -> u64 {
+    u64::try_from(since.elapsed().as_micros()).unwrap_or(u64::MAX)
+}
+
+/// A detector: model, anchors, decoding and its input value range.
+#[derive(Debug)]
+struct Detector {
+    model: Model,
+    anchors: Vec<Anchor>,
+    decode: DecodeOptions,
+    range: (f32, f32),
+    crop: CropBuffer,
+    boxes_out: usize,
+    scores_out: usize,
+}
+
+impl Detector {
+    fn load(
+        dir: &Path,
+        name: &str,
+        anchor_options: &AnchorOptions,
+        num_keypoints: usize,
+        range: (f32, f32),
+        min_score: f32,
+    ) -> Result<Self> {
+        let model = Model::load(dir, name)?;
+        let anchors = anchors::generate(anchor_options);
+        let (w, h) = model.input_size();
+        if (w, h) != (anchor_options.input_width, anchor_options.input_height) {
+            return Err(AssessError::Model {
+                path: model.path().to_path_buf(),
+                message: format!(
+                    "input is {w}×{h}; the detector expects {}×{}",
+                    anchor_options.input_width, anchor_options.input_height
+                ),
+            });
+        }
+        let num_coords = 4 + 2 * num_keypoints;
+        // The outputs are told apart by size: boxes N·coords, scores N.
+        let sizes = model.output_sizes();
+        let find = |n: usize| -> Result<usize> {
+            sizes
+                .iter()
+                .position(|&s| s == n)
+                .ok_or_else(|| AssessError::Model {
+                    path: model.path().to_path_buf(),
+                    message: format!("no output with {n} values (sizes {sizes:?})"),
+                })
+        };
+        let boxes_out = find(anchors.len() * num_coords)?;
+        let scores_out = find(anchors.len())?;
+        Ok(Self {
+            crop: CropBuffer::new(w, h),
+            decode: DecodeOptions {
+                num_coords,
+                num_keypoints,
+                scale: w as f32,
+                min_score,
+            },
+            model,
+            anchors,
+            range,
+            boxes_out,
+            scores_out,
+        })
+    }
+
+    /// Runs on the whole image (letterboxed) and returns NMS'd detections normalised to the
+    /// image, best first.
+    fn detect(&mut self, image: &RgbImage) -> Result<Vec<Detection>> {
+        let (iw, ih) = (image.width as f32, image.height as f32);
+        let ((pw, ph), padding) = roi::pad_to_aspect(iw, ih, self.model.input_size());
+        let full = roi::Roi {
+            cx: f64::from(iw) / 2.0,
+            cy: f64::from(ih) / 2.0,
+            width: f64::from(pw),
+            height: f64::from(ph),
+            rotation: 0.0,
+        };
+        crop_to_tensor(image, &full, self.range, Border::Zero, &mut self.crop)?;
+        self.model.run(&self.crop.tensor)?;
+        let raw = detect::decode(
+            self.model.output(self.boxes_out),
+            self.model.output(self.scores_out),
+            &self.anchors,
+            &self.decode,
+        );
+        let mut dets = detect::weighted_nms(raw, 0.3);
+        for d in &mut dets {
+            d.remove_letterbox(padding);
+        }
+        Ok(dets)
+    }
+}
+
+/// A landmark model and where its outputs are.
+#[derive(Debug)]
+struct LandmarkModel {
+    model: Model,
+    crop: CropBuffer,
+    landmarks_out: usize,
+    flag_out: usize,
+    /// Extra score output (hand: handedness).
+    extra_out: Option<usize>,
+    values_per_landmark: usize,
+    range: (f32, f32),
+}
+
+impl LandmarkModel {
+    fn load(
+        dir: &Path,
+        name: &str,
+        landmarks: (&str, usize),
+        flag: &str,
+        extra: Option<&str>,
+    ) -> Result<Self> {
+        let model = Model::load(dir, name)?;
+        let (w, h) = model.input_size();
+        Ok(Self {
+            crop: CropBuffer::new(w, h),
+            landmarks_out: model.output_index(landmarks.0)?,
+            flag_out: model.output_index(flag)?,
+            extra_out: extra.map(|e| model.output_index(e)).transpose()?,
+            values_per_landmark: landmarks.1,
+            model,
+            range: (0.0, 1.0),
+        })
+    }
+
+    /// Runs on `rect`; returns the raw landmark values (input pixels) and the flag output.
+    fn run(&mut self, image: &RgbImage, rect: &NormRect) -> Result<(&[f32], f32, Option<f32>)> {
+        let roi = rect.to_pixels((image.width, image.height));
+        crop_to_tensor(image, &roi, self.range, Border::Replicate, &mut self.crop)?;
+        self.model.run(&self.crop.tensor)?;
+        let flag = self
+            .model
+            .output(self.flag_out)
+            .first()
+            .copied()
+            .unwrap_or(0.0);
+        let extra = self
+            .extra_out
+            .and_then(|i| self.model.output(i).first().copied());
+        Ok((self.model.output(self.landmarks_out), flag, extra))
+    }
+
+    /// Projects raw landmarks (input pixels) back to the image, in pixels.
+    fn project(
+        &self,
+        raw: &[f32],
+        rect: &NormRect,
+        image: (u32, u32),
+        scores: bool,
+    ) -> Vec<Landmark> {
+        let (w, h) = self.model.input_size();
+        let (iw, ih) = (f64::from(image.0), f64::from(image.1));
+        raw.chunks_exact(self.values_per_landmark)
+            .map(|v| {
+                let [x, y] = rect.project(v[0] / w as f32, v[1] / h as f32);
+                let z = v[2] / w as f32 * rect.width;
+                let (visibility, presence) = if scores && v.len() >= 5 {
+                    (f64::from(sigmoid(v[3])), f64::from(sigmoid(v[4])))
+                } else {
+                    (1.0, 1.0)
+                };
+                Landmark {
+                    x: f64::from(x) * iw,
+                    y: f64::from(y) * ih,
+                    z: f64::from(z) * iw,
+                    visibility,
+                    presence,
+                }
+            })
+            .collect()
+    }
+}
+
+/// Landmarks normalised to the image, as the ROI calculators want them.
+fn normalised(points: &[Landmark], image: (u32, u32)) -> Vec<[f32; 2]> {
+    let (iw, ih) = (image.0 as f64, image.1 as f64);
+    points
+        .iter()
+        .map(|p| [(p.x / iw) as f32, (p.y / ih) as f32])
+        .collect()
+}
+
+const POSE_ROI: RectTransform = RectTransform {
+    scale_x: 1.25,
+    scale_y: 1.25,
+    shift_x: 0.0,
+    shift_y: 0.0,
+    square_long: true,
+};
+const FACE_ROI: RectTransform = RectTransform {
+    scale_x: 1.5,
+    scale_y: 1.5,
+    shift_x: 0.0,
+    shift_y: 0.0,
+    square_long: true,
+};
+const PALM_ROI: RectTransform = RectTransform {
+    scale_x: 2.6,
+    scale_y: 2.6,
+    shift_x: 0.0,
+    shift_y: -0.5,
+    square_long: true,
+};
+const HAND_TRACK_ROI: RectTransform = RectTransform {
+    scale_x: 2.0,
+    scale_y: 2.0,
+    shift_x: 0.0,
+    shift_y: -0.1,
+    square_long: true,
+};
+const HAND_FROM_POSE_ROI: RectTransform = RectTransform {
+    scale_x: 2.7,
+    scale_y: 2.7,
+    shift_x: 0.0,
+    shift_y: -0.1,
+    square_long: true,
+};
+
+/// The face ROI from face landmarks (`face_landmarks_to_roi`): landmark bounding box, rotated
+/// by the eye corners 33 → 263 to 0°.
+pub fn face_rect_from_landmarks(points: &[[f32; 2]], image: (u32, u32)) -> Option<NormRect> {
+    let d = bbox_detection(points)?;
+    let (a, b) = (*points.get(33)?, *points.get(263)?);
+    let (w, h) = (image.0 as f32, image.1 as f32);
+    let rect = NormRect {
+        cx: d.xmin + d.width / 2.0,
+        cy: d.ymin + d.height / 2.0,
+        width: d.width,
+        height: d.height,
+        rotation: roi::rotation_between([a[0] * w, a[1] * h], [b[0] * w, b[1] * h], 0.0),
+    };
+    rect.is_usable().then(|| rect.transformed(&FACE_ROI, image))
+}
+
+fn bbox_detection(points: &[[f32; 2]]) -> Option<Detection> {
+    let first = points.first()?;
+    let (mut x0, mut y0, mut x1, mut y1) = (first[0], first[1], first[0], first[1]);
+    for p in points {
+        x0 = x0.min(p[0]);
+        y0 = y0.min(p[1]);
+        x1 = x1.max(p[0]);
+        y1 = y1.max(p[1]);
+    }
+    Some(Detection {
+        score: 1.0,
+        xmin: x0,
+        ymin: y0,
+        width: x1 - x0,
+        height: y1 - y0,
+        keypoints: Vec::new(),
+    })
+}
+
+/// The hand ROI from hand landmarks (`HandLandmarksToRectCalculator` + transform): rotation
+/// from the wrist to the middle of the index/middle/ring knuckles, bounding box of the palm
+/// and lower finger joints in that rotated frame.
+pub fn hand_rect_from_landmarks(points: &[[f32; 2]], image: (u32, u32)) -> Option<NormRect> {
+    const SUBSET: [usize; 12] = [0, 1, 2, 3, 5, 6, 9, 10, 13, 14, 17, 18];
+    if points.len() < 21 {
+        return None;
+    }
+    let (w, h) = (image.0 as f32, image.1 as f32);
+    let p = |i: usize| points[i];
+    let (x0, y0) = (p(0)[0] * w, p(0)[1] * h);
+    let x1 = ((p(5)[0] + p(13)[0]) / 2.0 + p(9)[0]) / 2.0 * w;
+    let y1 = ((p(5)[1] + p(13)[1]) / 2.0 + p(9)[1]) / 2.0 * h;
+    let rotation = roi::rotation_between([x0, y0], [x1, y1], std::f32::consts::FRAC_PI_2);
+    let reverse = roi::normalize_radians(-rotation);
+    let (mut min_x, mut min_y, mut max_x, mut max_y) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
+    for &i in &SUBSET {
+        min_x = min_x.min(p(i)[0]);
+        max_x = max_x.max(p(i)[0]);
+        min_y = min_y.min(p(i)[1]);
+        max_y = max_y.max(p(i)[1]);
+    }
+    let acx = (max_x + min_x) / 2.0;
+    let acy = (max_y + min_y) / 2.0;
+    let (mut min_x, mut min_y, mut max_x, mut max_y) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
+    let (sr, cr) = reverse.sin_cos();
+    for &i in &SUBSET {
+        let ox = (p(i)[0] - acx) * w;
+        let oy = (p(i)[1] - acy) * h;
+        let px = ox * cr - oy * sr;
+        let py = ox * sr + oy * cr;
+        min_x = min_x.min(px);
+        max_x = max_x.max(px);
+        min_y = min_y.min(py);
+        max_y = max_y.max(py);
+    }
+    let pcx = (max_x + min_x) / 2.0;
+    let pcy = (max_y + min_y) / 2.0;
+    let (s, c) = rotation.sin_cos();
+    let cx = pcx * c - pcy * s + w * acx;
+    let cy = pcx * s + pcy * c + h * acy;
+    let rect = NormRect {
+        cx: cx / w,
+        cy: cy / h,
+        width: (max_x - min_x) / w,
+        height: (max_y - min_y) / h,
+        rotation,
+    };
+    rect.is_usable()
+        .then(|| rect.transformed(&HAND_TRACK_ROI, image))
+}
+
+/// A hand ROI from the pose's wrist, index and pinky landmarks (MediaPipe Holistic's
+/// `HandDetectionsFromPoseToRectsCalculator`): centred on the estimated middle knuckle, side
+/// twice its distance to the wrist, rotated wrist → knuckle to 90°.
+pub fn hand_rect_from_pose(
+    wrist: [f32; 2],
+    index: [f32; 2],
+    pinky: [f32; 2],
+    image: (u32, u32),
+) -> Option<NormRect> {
+    let middle = [
+        (2.0 * index[0] + pinky[0]) / 3.0,
+        (2.0 * index[1] + pinky[1]) / 3.0,
+    ];
+    let (w, h) = (image.0 as f32, image.1 as f32);
+    let dx = (middle[0] - wrist[0]) * w;
+    let dy = (middle[1] - wrist[1]) * h;
+    let size = (dx * dx + dy * dy).sqrt() * 2.0;
+    let rect = NormRect {
+        cx: middle[0],
+        cy: middle[1],
+        width: size / w,
+        height: size / h,
+        rotation: roi::rotation_between(
+            [wrist[0] * w, wrist[1] * h],
+            [middle[0] * w, middle[1] * h],
+            std::f32::consts::FRAC_PI_2,
+        ),
+    };
+    rect.is_usable()
+        .then(|| rect.transformed(&HAND_FROM_POSE_ROI, image))
+}
+
+/// Tracking state of one hand slot.
+#[derive(Debug, Clone, Default)]
+struct HandTrack {
+    rect: Option<NormRect>,
+    last: Option<HandLandmarks>,
+}
+
+/// The landmark pipeline. Construct once ([`Pipeline::load`]), then call
+/// [`Pipeline::process`] per frame.
+#[derive(Debug)]
+pub struct Pipeline {
+    config: PipelineConfig,
+    pose_detector: Detector,
+    pose_model: LandmarkModel,
+    face_detector: Detector,
+    face_model: LandmarkModel,
+    palm_detector: Detector,
+    hand_model: LandmarkModel,
+    pose_rect: Option<NormRect>,
+    face_rect: Option<NormRect>,
+    last_face: Option<FaceLandmarks>,
+    hands: [HandTrack; 2],
+    frame: u64,
+    times: StageTimes,
+}
+
+impl Pipeline {
+    /// Loads the models from `dir` (see [`super::models::model_dir`]).
+    pub fn load(dir: &Path, config: PipelineConfig) -> Result<Self> {
+        let (pose_lm, palm, hand_lm) = match config.variant {
+            Variant::Full => (
+                "pose_landmark_full",
+                "palm_detection_full",
+                "hand_landmark_full",
+            ),
+            Variant::Lite => (
+                "pose_landmark_lite",
+                "palm_detection_lite",
+                "hand_landmark_lite",
+            ),
+        };
+        let min = config.min_detection_score;
+        Ok(Self {
+            pose_detector: Detector::load(
+                dir,
+                "pose_detection",
+                &anchors::POSE_DETECTION,
+                4,
+                (-1.0, 1.0),
+                min,
+            )?,
+            pose_model: LandmarkModel::load(dir, pose_lm, ("Identity", 5), "Identity_1", None)?,
+            face_detector: Detector::load(
+                dir,
+                "face_detection_short_range",
+                &anchors::FACE_DETECTION,
+                6,
+                (-1.0, 1.0),
+                min,
+            )?,
+            face_model: LandmarkModel::load(
+                dir,
+                "face_landmark",
+                ("Identity", 3),
+                "Identity_1",
+                None,
+            )?,
+            palm_detector: Detector::load(dir, palm, &anchors::PALM_DETECTION, 7, (0.0, 1.0), min)?,
+            hand_model: LandmarkModel::load(
+                dir,
+                hand_lm,
+                ("Identity", 3),
+                "Identity_1",
+                Some("Identity_2"),
+            )?,
+            config,
+            pose_rect: None,
+            face_rect: None,
+            last_face: None,
+            hands: [HandTrack::default(), HandTrack::default()],
+            frame: 0,
+            times: StageTimes::default(),
+        })
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &PipelineConfig {
+        &self.config
+    }
+
+    /// Stage times of the last frame.
+    pub fn stage_times(&self) -> StageTimes {
+        self.times
+    }
+
+    /// Forgets all tracking state (the next frame runs the detectors).
+    pub fn reset(&mut self) {
+        self.pose_rect = None;
+        self.face_rect = None;
+        self.last_face = None;
+        self.hands = [HandTrack::default(), HandTrack::default()];
+    }
+
+    /// Finds the operator's landmarks on one frame. `depth`, aligned to `image`, is used to
+    /// choose the nearest person. An empty or malformed image gives empty landmarks and
+    /// resets tracking.
+    pub fn process(&mut self, image: &RgbImage, depth: Option<&DepthImage>) -> Result<Landmarks> {
+        let start = Instant::now();
+        self.times = StageTimes::default();
+        let mut out = Landmarks::default();
+        if !image.is_well_formed() {
+            self.reset();
+            return Ok(out);
+        }
+        if self.config.mode == Mode::Static {
+            self.reset();
+        }
+        let size = (image.width, image.height);
+        out.pose = self.pose(image, depth)?;
+        if self.config.face {
+            out.face = self.face(image, depth, out.pose.as_ref())?;
+        }
+        if self.config.hands {
+            out.hands = self.hands(image, out.pose.as_ref())?;
+        }
+        let _ = size;
+        self.frame += 1;
+        self.times.total_us = micros(start);
+        Ok(out)
+    }
+
+    fn pose(
+        &mut self,
+        image: &RgbImage,
+        depth: Option<&DepthImage>,
+    ) -> Result<Option<PoseLandmarks>> {
+        let size = (image.width, image.height);
+        for attempt in 0..2 {
+            let rect = match self.pose_rect {
+                Some(r) => r,
+                None => {
+                    let t = Instant::now();
+                    let dets = self.pose_detector.detect(image)?;
+                    self.times.pose_detection_us += micros(t);
+                    let Some(d) = choose_operator(&dets, size, depth) else {
+                        return Ok(None);
+                    };
+                    let Some(r) = rect_from_alignment(d, size, 0, 1, 90.0) else {
+                        return Ok(None);
+                    };
+                    r.transformed(&POSE_ROI, size)
+                }
+            };
+            let t = Instant::now();
+            let (raw, flag, _) = self.pose_model.run(image, &rect)?;
+            let raw = raw.to_vec();
+            self.times.pose_landmarks_us += micros(t);
+            if flag < self.config.min_presence_score || raw.len() < 39 * 5 {
+                // Lost: detect again at once (a tracked ROI) or give up (a detected one).
+                let was_tracking = self.pose_rect.take().is_some();
+                if was_tracking && attempt == 0 {
+                    continue;
+                }
+                return Ok(None);
+            }
+            let all = self.pose_model.project(&raw, &rect, size, true);
+            let norm = normalised(&all, size);
+            // Auxiliary landmarks 33 (body centre) and 34 (scale) give the next ROI.
+            self.pose_rect = if self.config.mode == Mode::Tracking {
+                rect_from_points_opt(&norm, 33, 34, size).map(|r| r.transformed(&POSE_ROI, size))
+            } else {
+                None
+            };
+            let mut points = [Landmark::default(); 33];
+            points.copy_from_slice(&all[..33]);
+            return Ok(Some(PoseLandmarks {
+                points,
+                score: f64::from(flag),
+                roi: rect.to_pixels(size),
+            }));
+        }
+        Ok(None)
+    }
+
+    fn face(
+        &mut self,
+        image: &RgbImage,
+        depth: Option<&DepthImage>,
+        pose: Option<&PoseLandmarks>,
+    ) -> Result<Option<FaceLandmarks>> {
+        let size = (image.width, image.height);
+        let tracking = self.config.mode == Mode::Tracking;
+        if tracking
+            && self.face_rect.is_some()
+            && self.config.face_every > 1
+            && !self.frame.is_multiple_of(u64::from(self.config.face_every))
+        {
+            return Ok(self.last_face.clone());
+        }
+        for attempt in 0..2 {
+            let rect = match self.face_rect {
+                Some(r) => r,
+                None => {
+                    let t = Instant::now();
+                    let dets = self.face_detector.detect(image)?;
+                    self.times.face_detection_us += micros(t);
+                    let chosen = match pose {
+                        // The face nearest the operator's nose.
+                        Some(p) => nearest_to(&dets, size, [p.points[0].x, p.points[0].y]),
+                        None => choose_operator(&dets, size, depth),
+                    };
+                    let Some(d) = chosen else {
+                        self.last_face = None;
+                        return Ok(None);
+                    };
+                    let Some(r) = rect_from_box(d, size, 0, 1, 0.0) else {
+                        return Ok(None);
+                    };
+                    r.transformed(&FACE_ROI, size)
+                }
+            };
+            let t = Instant::now();
+            let (raw, flag, _) = self.face_model.run(image, &rect)?;
+            let raw = raw.to_vec();
+            self.times.face_landmarks_us += micros(t);
+            let score = sigmoid(flag);
+            if score < self.config.min_presence_score || raw.len() < 468 * 3 {
+                let was_tracking = self.face_rect.take().is_some();
+                self.last_face = None;
+                if was_tracking && attempt == 0 {
+                    continue;
+                }
+                return Ok(None);
+            }
+            let points = self.face_model.project(&raw, &rect, size, false);
+            self.face_rect = if tracking {
+                face_rect_from_landmarks(&normalised(&points, size), size)
+            } else {
+                None
+            };
+            let face = FaceLandmarks {
+                points,
+                score: f64::from(score),
+                roi: rect.to_pixels(size),
+            };
+            self.last_face = Some(face.clone());
+            return Ok(Some(face));
+        }
+        Ok(None)
+    }
+
+    fn hands(
+        &mut self,
+        image: &RgbImage,
+        pose: Option<&PoseLandmarks>,
+    ) -> Result<Vec<HandLandmarks>> {
+        let size = (image.width, image.height);
+        let tracking = self.config.mode == Mode::Tracking;
+        // Candidate ROIs per slot (0: the person's left hand, 1: right): tracked, else from
+        // the pose.
+        let mut rects: [Option<NormRect>; 2] = [self.hands[0].rect, self.hands[1].rect];
+        if tracking && let Some(p) = pose {
+            for (slot, (wrist, index, pinky)) in
+                [(15, 19, 17), (16, 20, 18)].into_iter().enumerate()
+            {
+                if rects[slot].is_none() && p.points[wrist].visibility > 0.5 {
+                    let n = |i: usize| {
+                        [
+                            (p.points[i].x / f64::from(size.0)) as f32,
+                            (p.points[i].y / f64::from(size.1)) as f32,
+                        ]
+                    };
+                    rects[slot] = hand_rect_from_pose(n(wrist), n(index), n(pinky), size);
+                }
+            }
+        }
+        let missing = rects.iter().filter(|r| r.is_none()).count();
+        let palm_due = !tracking
+            || self
+                .frame
+                .is_multiple_of(u64::from(self.config.palm_every.max(1)));
+        let mut from_palms: Vec<NormRect> = Vec::new();
+        if missing > 0 && palm_due {
+            let t = Instant::now();
+            let dets = self.palm_detector.detect(image)?;
+            self.times.palm_detection_us += micros(t);
+            for d in dets.iter().take(2) {
+                if let Some(r) = rect_from_box(d, size, 0, 2, 90.0) {
+                    let r = r.transformed(&PALM_ROI, size);
+                    // Skip palms already covered by a tracked hand.
+                    let covered = rects.iter().flatten().any(|t| {
+                        ((t.cx - r.cx) * size.0 as f32).hypot((t.cy - r.cy) * size.1 as f32)
+                            < 0.5 * t.width.max(r.width) * size.0 as f32
+                    });
+                    if !covered {
+                        from_palms.push(r);
+                    }
+                }
+            }
+        }
+        let mut found: Vec<HandLandmarks> = Vec::new();
+        let t = Instant::now();
+        // Tracked/pose slots first, then palm candidates.
+        let mut jobs: Vec<(Option<usize>, NormRect)> = Vec::new();
+        for (slot, r) in rects.iter().enumerate() {
+            if let Some(r) = r {
+                jobs.push((Some(slot), *r));
+            }
+        }
+        for r in from_palms {
+            jobs.push((None, r));
+        }
+        let mut next: [HandTrack; 2] = [HandTrack::default(), HandTrack::default()];
+        for (slot, rect) in jobs {
+            if found.len() == 2 {
+                break;
+            }
+            // Staggered rate: a tracked hand skipped this frame keeps its last landmarks.
+            if let Some(s) = slot
+                && tracking
+                && self.config.hand_every > 1
+                && self.hands[s].last.is_some()
+                && !(self.frame + s as u64).is_multiple_of(u64::from(self.config.hand_every))
+            {
+                if let Some(last) = self.hands[s].last.clone() {
+                    next[s] = self.hands[s].clone();
+                    found.push(last);
+                }
+                continue;
+            }
+            let (raw, flag, handed) = self.hand_model.run(image, &rect)?;
+            let raw = raw.to_vec();
+            if flag < self.config.min_presence_score || raw.len() < 21 * 3 {
+                continue;
+            }
+            let all = self.hand_model.project(&raw, &rect, size, false);
+            let mut points = [Landmark::default(); 21];
+            points.copy_from_slice(&all[..21]);
+            // MediaPipe's handedness output assumes a mirrored (selfie) image: its score is
+            // the probability of a right hand in the mirror, i.e. a left hand in an
+            // unmirrored camera image.
+            let right_hand = 1.0 - f64::from(handed.unwrap_or(0.5));
+            let hand = HandLandmarks {
+                points,
+                score: f64::from(flag),
+                right_hand,
+                roi: rect.to_pixels(size),
+            };
+            // The same hand found twice (two ROIs on one hand): keep the first.
+            if found.iter().any(|h| same_hand(h, &hand)) {
+                continue;
+            }
+            let s = slot.unwrap_or(if right_hand >= 0.5 { 1 } else { 0 });
+            if next[s].last.is_none() {
+                next[s] = HandTrack {
+                    rect: if tracking {
+                        hand_rect_from_landmarks(&normalised(&hand.points, size), size)
+                    } else {
+                        None
+                    },
+                    last: Some(hand.clone()),
+                };
+            }
+            found.push(hand);
+        }
+        self.times.hand_landmarks_us += micros(t);
+        self.hands = next;
+        Ok(found)
+    }
+}
+
+fn rect_from_points_opt(
+    norm: &[[f32; 2]],
+    a: usize,
+    b: usize,
+    size: (u32, u32),
+) -> Option<NormRect> {
+    roi::rect_from_points(*norm.get(a)?, *norm.get(b)?, size, 90.0)
+}
+
+/// Whether two hand landmark sets are the same hand (wrists closer than a quarter of the
+/// wrist–middle-knuckle length).
+fn same_hand(a: &HandLandmarks, b: &HandLandmarks) -> bool {
+    let d = |p: &Landmark, q: &Landmark| (p.x - q.x).hypot(p.y - q.y);
+    let scale = d(&a.points[0], &a.points[9]).max(1.0);
+    d(&a.points[0], &b.points[0]) < 0.25 * scale && d(&a.points[9], &b.points[9]) < 0.25 * scale
+}
+
+/// The detection nearest a pixel.
+fn nearest_to(dets: &[Detection], size: (u32, u32), p: [f64; 2]) -> Option<&Detection> {
+    let dist = |d: &Detection| {
+        let cx = f64::from(d.xmin + d.width / 2.0) * f64::from(size.0);
+        let cy = f64::from(d.ymin + d.height / 2.0) * f64::from(size.1);
+        (cx - p[0]).hypot(cy - p[1])
+    };
+    dets.iter().min_by(|a, b| dist(a).total_cmp(&dist(b)))
+}
+
+/// The operator among several detections: the nearest by median depth inside the box when
+/// depth is given and valid there, else the largest box (in pixels).
+pub fn choose_operator<'a>(
+    dets: &'a [Detection],
+    size: (u32, u32),
+    depth: Option<&DepthImage>,
+) -> Option<&'a Detection> {
+    if let Some(depth) = depth {
+        let nearest = dets
+            .iter()
+            .filter_map(|d| box_median_depth(d, size, depth).map(|z| (d, z)))
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((d, _)) = nearest {
+            return Some(d);
+        }
+    }
+    dets.iter().max_by(|a, b| a.area().total_cmp(&b.area()))
+}
+
+/// Median valid depth [m] on a grid of up to 15 × 15 samples inside a detection box.
+fn box_median_depth(d: &Detection, size: (u32, u32), depth: &DepthImage) -> Option<f64> {
+    if depth.width != size.0 || depth.height != size.1 {
+        return None;
+    }
+    let mut samples = Vec::with_capacity(225);
+    for j in 0..15 {
+        for i in 0..15 {
+            let x = (d.xmin + d.width * (i as f32 + 0.5) / 15.0) * size.0 as f32;
+            let y = (d.ymin + d.height * (j as f32 + 0.5) / 15.0) * size.1 as f32;
+            if x >= 0.0
+                && y >= 0.0
+                && let Some(z) = depth.depth_m(x as u32, y as u32)
+            {
+                samples.push(z);
+            }
+        }
+    }
+    if samples.len() < 5 {
+        return None;
+    }
+    samples.sort_by(f64::total_cmp);
+    samples.get(samples.len() / 2).copied()
+}
