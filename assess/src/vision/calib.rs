@@ -226,7 +226,7 @@ impl BoardSpec {
                 format!("each must be 3..=64 (got {squares_x} x {squares_y})"),
             ));
         }
-        if squares_y % 2 == 0 {
+        if squares_y.is_multiple_of(2) {
             return Err(AssessError::invalid(
                 "squares_y",
                 format!(

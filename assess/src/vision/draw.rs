@@ -237,12 +237,10 @@ fn clip_segment(
             }
         }
     }
-    (t0 <= t1).then(|| {
-        (
-            (a.0 + t0 * dx, a.1 + t0 * dy),
-            (a.0 + t1 * dx, a.1 + t1 * dy),
-        )
-    })
+    (t0 <= t1).then_some((
+        (a.0 + t0 * dx, a.1 + t0 * dy),
+        (a.0 + t1 * dx, a.1 + t1 * dy),
+    ))
 }
 
 /// The drawable rectangle of an image [px], with a margin for line thickness.
@@ -533,4 +531,188 @@ pub fn axes(
         segment_3d(img, proj, &o, &tip.coords, colour, 3)?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vision::landmarks::{HandLandmarks, PoseLandmarks};
+    use crate::vision::roi::Roi;
+
+    fn img() -> RgbImage {
+        RgbImage::black(200, 100)
+    }
+
+    fn px(img: &RgbImage, u: u32, v: u32) -> [u8; 3] {
+        let i = ((v * img.width + u) * 3) as usize;
+        [img.data[i], img.data[i + 1], img.data[i + 2]]
+    }
+
+    /// A camera at the workspace origin looking along +x, z up (image x = -y, image y = -z).
+    fn projector() -> Projector {
+        let r = nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_columns(&[
+            -Vec3::y(),
+            -Vec3::z(),
+            Vec3::x(),
+        ]));
+        let e = Extrinsics {
+            world_from_camera: Isometry3::from_parts(
+                nalgebra::Translation3::identity(),
+                nalgebra::UnitQuaternion::from_rotation_matrix(&r),
+            ),
+        };
+        Projector::new(Intrinsics::from_hfov(200, 100, 90.0), &e)
+    }
+
+    #[test]
+    fn line_draws_its_pixels_in_rgb_order() {
+        let mut im = img();
+        line(&mut im, (10.0, 50.0), (190.0, 50.0), RED, 3).expect("line");
+        assert_eq!(px(&im, 100, 50), RED);
+        assert_eq!(px(&im, 100, 20), [0, 0, 0]);
+    }
+
+    #[test]
+    fn out_of_image_and_non_finite_input_is_ignored() {
+        let mut im = img();
+        line(&mut im, (-500.0, -10.0), (-100.0, -300.0), RED, 3).expect("outside");
+        line(&mut im, (f64::NAN, 0.0), (10.0, 10.0), RED, 3).expect("nan");
+        line(&mut im, (-1e300, 20.0), (1e300, 80.0), RED, 1).expect("absurd: no panic");
+        let absurd = im.data.chunks(3).filter(|p| p != &[0, 0, 0]).count();
+        assert!(absurd < 50, "{absurd}");
+        im = img();
+        line(&mut im, (-1e7, 50.0), (1e7, 50.0), RED, 3).expect("far ends");
+        dot(&mut im, (1e9, 1e9), 5, RED).expect("far dot");
+        dot(&mut im, (f64::INFINITY, 3.0), 5, RED).expect("inf dot");
+        text(&mut im, "far away", (1e12, -1e12), WHITE).expect("far text");
+        // Only the long horizontal line, clipped to the image, was drawn.
+        let changed = im.data.chunks(3).filter(|p| p != &[0, 0, 0]).count();
+        assert!((3 * 200..=8 * 200).contains(&changed), "{changed}");
+        assert_eq!(px(&im, 100, 50), RED);
+        let mut small = RgbImage {
+            width: 10,
+            height: 10,
+            data: vec![0; 5],
+        };
+        assert!(line(&mut small, (0.0, 0.0), (5.0, 5.0), RED, 1).is_err());
+    }
+
+    #[test]
+    fn segment_behind_the_camera_is_clipped() {
+        let p = projector();
+        // From 1 m ahead to 1 m behind, 0.2 m up: the visible half ends at the top edge.
+        let seg = p
+            .segment(&Vec3::new(1.0, 0.0, 0.2), &Vec3::new(-1.0, 0.0, 0.2))
+            .expect("half visible");
+        assert!((seg.0.0 - 100.0).abs() < 1e-9 && (seg.0.1 - 30.0).abs() < 1e-9);
+        assert!(seg.1.1 < -1000.0, "towards the top, far out: {:?}", seg.1);
+        assert!(
+            p.segment(&Vec3::new(-1.0, 0.0, 0.0), &Vec3::new(-2.0, 0.0, 0.0))
+                .is_none()
+        );
+        assert!(p.pixel(&Vec3::new(-1.0, 0.0, 0.0)).is_none());
+    }
+
+    #[test]
+    fn head_ray_areas_and_axes_land_where_projected() {
+        let p = projector();
+        let mut im = img();
+        // Head 2 m ahead, looking to its left (+y): the ray runs left from the centre.
+        head_ray(&mut im, &p, &Vec3::new(2.0, 0.0, 0.0), &Vec3::y(), 0.5).expect("ray");
+        assert_eq!(px(&im, 90, 50), MAGENTA);
+        assert_eq!(px(&im, 110, 50), [0, 0, 0]);
+        // Behind the camera: nothing, no error.
+        let before = im.clone();
+        head_ray(&mut im, &p, &Vec3::new(-2.0, 0.0, 0.0), &Vec3::y(), 0.5).expect("behind");
+        assert_eq!(im, before);
+
+        let ws = Workspace::from_toml_str(
+            r#"
+            [[area]]
+            name = "left"
+            min_m = [2.0, 0.3, -0.2]
+            max_m = [2.4, 0.7, 0.2]
+            [[area]]
+            name = "right"
+            min_m = [2.0, -0.7, -0.2]
+            max_m = [2.4, -0.3, 0.2]
+            "#,
+        )
+        .expect("workspace");
+        let mut im = img();
+        areas(&mut im, &p, &ws, Some(AreaId(1))).expect("areas");
+        // Near vertical edges at u = 100 ∓ 100 * 0.3 / 2 = 85 (left) and 115 (right), v = 50.
+        assert_eq!(px(&im, 85, 50), CYAN);
+        assert_eq!(px(&im, 115, 50), YELLOW);
+
+        let mut im = img();
+        let at = Isometry3::translation(2.0, 0.0, 0.0);
+        axes(&mut im, &p, &at, 0.4).expect("axes");
+        assert_eq!(px(&im, 100, 40), BLUE, "z up");
+        assert_eq!(px(&im, 90, 50), GREEN, "y left");
+    }
+
+    #[test]
+    fn landmarks_draw_skeletons_and_skip_invisible_points() {
+        let mut points = [Landmark {
+            visibility: 1.0,
+            presence: 1.0,
+            ..Landmark::default()
+        }; 33];
+        points[11].x = 60.5;
+        points[11].y = 40.5;
+        points[12].x = 140.5;
+        points[12].y = 40.5;
+        points[13] = Landmark {
+            x: 60.5,
+            y: 90.5,
+            visibility: 0.1,
+            ..points[13]
+        };
+        let roi = Roi {
+            cx: 0.0,
+            cy: 0.0,
+            width: 1.0,
+            height: 1.0,
+            rotation: 0.0,
+        };
+        let mut hand = [Landmark::default(); 21];
+        for (i, p) in hand.iter_mut().enumerate() {
+            p.x = 20.5 + i as f64;
+            p.y = 80.5;
+        }
+        let lm = Landmarks {
+            pose: Some(PoseLandmarks {
+                points,
+                score: 1.0,
+                roi,
+            }),
+            face: None,
+            hands: vec![HandLandmarks {
+                points: hand,
+                score: 1.0,
+                right_hand: 0.9,
+                roi,
+            }],
+        };
+        let mut im = img();
+        landmarks(&mut im, &lm).expect("draw");
+        assert_eq!(px(&im, 100, 40), WHITE, "shoulder line");
+        assert_eq!(px(&im, 60, 65), [0, 0, 0], "invisible elbow: no upper arm");
+        assert_eq!(px(&im, 30, 80), GREEN, "right hand");
+    }
+
+    #[test]
+    fn text_lines_write_top_left() {
+        let mut im = RgbImage::black(300, 200);
+        im.data.iter_mut().for_each(|b| *b = 90);
+        text_lines(&mut im, &["AED 0.42", "HRC-CWL 0.61"], WHITE).expect("text");
+        let top = im.data[..300 * 60 * 3].iter().filter(|&&b| b != 90).count();
+        let bottom = im.data[300 * 120 * 3..]
+            .iter()
+            .filter(|&&b| b != 90)
+            .count();
+        assert!(top > 200, "{top}");
+        assert_eq!(bottom, 0);
+    }
 }
