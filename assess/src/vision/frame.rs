@@ -27,6 +27,39 @@ impl RgbImage {
         }
     }
 
+    /// Reads an image file (any format OpenCV decodes: PNG, JPEG, ...) as RGB. A missing,
+    /// empty, truncated or undecodable file is an [`AssessError::Source`] naming it.
+    pub fn read(path: &std::path::Path) -> crate::Result<Self> {
+        use opencv::core::{Mat, Vec3b};
+        use opencv::prelude::*;
+        use opencv::{imgcodecs, imgproc};
+        let err = |message: String| crate::AssessError::Source {
+            source_name: path.display().to_string(),
+            message,
+        };
+        let bytes = std::fs::read(path).map_err(|e| err(format!("cannot read: {e}")))?;
+        let buf = Mat::from_slice(&bytes).map_err(|e| err(e.message))?;
+        let bgr = imgcodecs::imdecode(&buf, imgcodecs::IMREAD_COLOR).map_err(|e| err(e.message))?;
+        if bgr.empty() {
+            return Err(err("not a decodable image (empty or truncated?)".into()));
+        }
+        let mut rgb = Mat::default();
+        imgproc::cvt_color_def(&bgr, &mut rgb, imgproc::COLOR_BGR2RGB)
+            .map_err(|e| err(e.message))?;
+        let (w, h) = (rgb.cols(), rgb.rows());
+        let data: Vec<u8> = rgb
+            .data_typed::<Vec3b>()
+            .map_err(|e| err(e.message))?
+            .iter()
+            .flat_map(|p| p.0)
+            .collect();
+        Ok(Self {
+            width: u32::try_from(w).map_err(|e| err(e.to_string()))?,
+            height: u32::try_from(h).map_err(|e| err(e.to_string()))?,
+            data,
+        })
+    }
+
     /// Whether the buffer holds exactly `width * height * 3` bytes and the image is not empty.
     pub fn is_well_formed(&self) -> bool {
         self.width > 0
