@@ -339,7 +339,7 @@ pub fn refine_from_heatmap(
     min_confidence: f32,
 ) {
     let n = raw.len() / values.max(1);
-    if values < 2 || hm_h == 0 || hm_w == 0 || heatmap.len() % (hm_h * hm_w) != 0 {
+    if values < 2 || hm_h == 0 || hm_w == 0 || !heatmap.len().is_multiple_of(hm_h * hm_w) {
         return;
     }
     let channels = heatmap.len() / (hm_h * hm_w);
