@@ -28,7 +28,7 @@ impl Lcg {
 fn frame(k: u64, rng: &mut Lcg) -> CueFrame {
     // A busy operator: gaze wandering over all areas, torso turning, both hands moving or
     // resting, dropouts, NaN cues, irregular intervals and gaps, collaboration periods.
-    let t = k as f64 / 30.0 + if k % 97 == 0 { 0.5 } else { 0.0 } + (k / 97) as f64 * 0.5;
+    let t = k as f64 / 30.0 + if k.is_multiple_of(97) { 0.5 } else { 0.0 } + (k / 97) as f64 * 0.5;
     let phase = k as f64 * 0.07;
     let gaze = Vec3::new(phase.cos(), phase.sin(), -0.3 + 0.2 * (phase * 3.0).sin());
     let torso = Vec3::new((phase * 0.5).cos(), (phase * 0.5).sin(), 0.0);
@@ -44,23 +44,23 @@ fn frame(k: u64, rng: &mut Lcg) -> CueFrame {
     };
     CueFrame {
         t,
-        head: (k % 13 != 0).then_some(HeadCue {
+        head: (!k.is_multiple_of(13)).then_some(HeadCue {
             position: Vec3::new(0.0, 0.0, 1.5),
-            facing: if k % 31 == 0 {
+            facing: if k.is_multiple_of(31) {
                 Vec3::new(f64::NAN, 0.0, 0.0)
             } else {
                 gaze
             },
             confidence: 0.2 + 0.8 * c_head,
         }),
-        body: (k % 7 != 0).then_some(BodyCue {
+        body: (!k.is_multiple_of(7)).then_some(BodyCue {
             position: Vec3::new(0.0, 0.0, 1.3),
             facing: torso,
             confidence: 0.9,
         }),
         hands: [
-            (k % 50 != 0).then(|| hand(0.0, 0.5 + 0.5 * c_left)),
-            (k % 70 != 0).then(|| hand(0.1, 0.5 + 0.5 * c_right)),
+            (!k.is_multiple_of(50)).then(|| hand(0.0, 0.5 + 0.5 * c_left)),
+            (!k.is_multiple_of(70)).then(|| hand(0.1, 0.5 + 0.5 * c_right)),
         ],
         robot: RobotContext {
             collaborating: (k / 90) % 2 == 1,

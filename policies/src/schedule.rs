@@ -276,7 +276,7 @@ impl ExperimentDesign {
             seed: self.seed,
             treatments,
             square_rows: rows,
-            complete: self.participants % rows == 0,
+            complete: self.participants.is_multiple_of(rows),
             sessions,
         })
     }

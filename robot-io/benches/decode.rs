@@ -57,10 +57,10 @@ fn recipe_and_package() -> (Recipe, Vec<u8>) {
 }
 
 fn decode(recipe: &Recipe, pkg: &[u8], out: &mut [Value]) {
-    if let Ok(ControllerPackage::Data(d)) = ControllerPackage::decode(pkg) {
-        if let Ok(payload) = recipe.check(&d) {
-            let _ = recipe.decode_into(payload, out);
-        }
+    if let Ok(ControllerPackage::Data(d)) = ControllerPackage::decode(pkg)
+        && let Ok(payload) = recipe.check(&d)
+    {
+        let _ = recipe.decode_into(payload, out);
     }
 }
 

@@ -105,11 +105,10 @@ fn saf_req_007_fault_injection_hand_during_approach() {
         if let Verdict::Stopped {
             violation: Violation::Separation { required_m, .. },
         } = v
+            && first_stop.is_none()
         {
-            if first_stop.is_none() {
-                first_stop = Some(k);
-                required = required_m;
-            }
+            first_stop = Some(k);
+            required = required_m;
         }
         let points = arm_points(&rig.state.actual_q);
         for (_, q) in points.as_array() {
