@@ -647,3 +647,267 @@ pub fn pnp(
     }
     Some((nalgebra::Rotation3::new(rv), tv))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vision::landmarks::{FaceLandmarks, HandLandmarks, PoseLandmarks};
+    use crate::vision::models::model_dir;
+    use crate::vision::roi::Roi;
+    use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion};
+
+    const INTR: Intrinsics = Intrinsics {
+        width: 640,
+        height: 480,
+        fx: 615.0,
+        fy: 615.0,
+        cx: 320.0,
+        cy: 240.0,
+    };
+
+    fn canonical() -> Vec<Point3<f64>> {
+        load_canonical_face(&model_dir().join("canonical_face_model.csv")).unwrap()
+    }
+
+    fn roi() -> Roi {
+        Roi {
+            cx: 0.0,
+            cy: 0.0,
+            width: 1.0,
+            height: 1.0,
+            rotation: 0.0,
+        }
+    }
+
+    fn lm(p: &Point3<f64>) -> Landmark {
+        let (u, v) = INTR.project(p).unwrap();
+        Landmark {
+            x: u,
+            y: v,
+            z: 0.0,
+            visibility: 1.0,
+            presence: 1.0,
+        }
+    }
+
+    /// A depth image at `far` [m] with each point's depth written into a (2r+1)² patch around
+    /// its pixel.
+    fn depth_of(points: &[Point3<f64>], far: f64, r: i64) -> DepthImage {
+        let mut data = vec![(far * 1000.0) as u16; 640 * 480];
+        for p in points {
+            let (u, v) = INTR.project(p).unwrap();
+            for y in v as i64 - r..=v as i64 + r {
+                for x in u as i64 - r..=u as i64 + r {
+                    if (0..640).contains(&x) && (0..480).contains(&y) {
+                        data[y as usize * 640 + x as usize] = (p.z * 1000.0).round() as u16;
+                    }
+                }
+            }
+        }
+        DepthImage {
+            width: 640,
+            height: 480,
+            data,
+            scale_m: 0.001,
+        }
+    }
+
+    /// A head turned 30° to its left and 10° down, 0.9 m in front of the camera. The canonical
+    /// face is y up, z out of the face; the camera is y down, z forward, so a frontal head is
+    /// the rotation diag(1, −1, −1) (180° about x).
+    fn head_pose() -> (Rotation3<f64>, nalgebra::Vector3<f64>) {
+        let frontal = Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
+        let turn = Rotation3::from_euler_angles(10f64.to_radians(), 30f64.to_radians(), 0.0);
+        (turn * frontal, Vector3::new(0.05, -0.1, 0.9))
+    }
+
+    fn face_landmarks(canon: &[Point3<f64>]) -> (Landmarks, Vec<Point3<f64>>) {
+        let (r, t) = head_pose();
+        let cam: Vec<Point3<f64>> = canon
+            .iter()
+            .map(|q| Point3::from(r * q.coords + t))
+            .collect();
+        let face = FaceLandmarks {
+            points: cam.iter().map(lm).collect(),
+            score: 0.9,
+            roi: roi(),
+        };
+        (
+            Landmarks {
+                face: Some(face),
+                ..Default::default()
+            },
+            cam,
+        )
+    }
+
+    #[test]
+    fn head_pose_from_depth_recovers_a_known_head() {
+        let canon = canonical();
+        let (landmarks, cam) = face_landmarks(&canon);
+        // Background 2.5 m: patches at the face outline partly hit it (outlier rejection).
+        let depth = depth_of(&cam, 2.5, 1);
+        let mut x = CueExtractor::new(CueConfig::default(), Extrinsics::identity(), canon).unwrap();
+        let c = x.extract(0.0, &landmarks, Some(&depth), &INTR);
+        assert_eq!(c.quality, CueQuality::Depth3d);
+        let head = c.frame.head.unwrap();
+        let (r, t) = head_pose();
+        let want_facing = r * Vector3::z();
+        let angle = head.facing.normalize().angle(&want_facing).to_degrees();
+        // Depth is quantised to 1 mm and patches overlap: a few degrees, a few mm.
+        assert!(angle < 3.0, "facing off by {angle:.2}°");
+        assert!(
+            (head.position - t).norm() < 0.01,
+            "position {:?}",
+            head.position
+        );
+        assert!(c.head_fit_rms_m.unwrap() < 0.005);
+        assert!(head.confidence > 0.5 && head.confidence <= 0.9);
+        // The facing points toward the camera side (−z) and to the head's left (+x in the
+        // image for a person facing the camera), by construction of the turn.
+        assert!(want_facing.z < 0.0);
+    }
+
+    #[test]
+    fn head_pose_without_depth_uses_pnp_and_is_flagged_2d() {
+        let canon = canonical();
+        let (landmarks, _) = face_landmarks(&canon);
+        let mut x = CueExtractor::new(CueConfig::default(), Extrinsics::identity(), canon).unwrap();
+        let c = x.extract(0.0, &landmarks, None, &INTR);
+        assert_eq!(c.quality, CueQuality::Image2d);
+        let head = c.frame.head.unwrap();
+        let (r, t) = head_pose();
+        let angle = head
+            .facing
+            .normalize()
+            .angle(&(r * Vector3::z()))
+            .to_degrees();
+        // Exact projections: PnP recovers the pose to numerical precision.
+        assert!(angle < 0.1, "facing off by {angle:.3}°");
+        assert!((head.position - t).norm() < 1e-3);
+    }
+
+    fn pose_at(points: &[(usize, Point3<f64>)]) -> PoseLandmarks {
+        let mut p = [Landmark::default(); 33];
+        for (i, q) in points {
+            p[*i] = lm(q);
+        }
+        PoseLandmarks {
+            points: p,
+            score: 0.95,
+            roi: roi(),
+        }
+    }
+
+    #[test]
+    fn torso_and_hands_from_a_known_body() {
+        // A person facing the camera at 1.2 m: their left shoulder (11) on the image's right
+        // (+x), hips 0.3 m below the shoulders (+y is down; inside the image). Chest normal:
+        // (L − R) × (S_mid − H_mid) = (0.38, 0, 0) × (0, −0.3, 0) = (0, 0, −0.114) → toward the
+        // camera.
+        let z = 1.2;
+        let l = Point3::new(0.19, 0.0, z);
+        let r = Point3::new(-0.19, 0.0, z);
+        let pose = pose_at(&[
+            (11, l),
+            (12, r),
+            (23, Point3::new(0.15, 0.3, z)),
+            (24, Point3::new(-0.15, 0.3, z)),
+            (15, Point3::new(0.25, 0.3, 0.9)),
+            (16, Point3::new(-0.25, 0.3, 0.9)),
+            (0, Point3::new(0.0, -0.25, z - 0.1)),
+        ]);
+        // The left hand's palm at 0.9 m; its 21 landmarks sit on one pixel cluster.
+        let palm = Point3::new(0.25, 0.3, 0.9);
+        let mut hp = [Landmark::default(); 21];
+        for (i, p) in hp.iter_mut().enumerate() {
+            *p = lm(&Point3::new(
+                palm.x + 0.002 * (i % 3) as f64,
+                palm.y,
+                palm.z,
+            ));
+        }
+        let hand = HandLandmarks {
+            points: hp,
+            score: 0.8,
+            right_hand: 0.1,
+            roi: roi(),
+        };
+        // Depth: the torso plane at 1.2 m, the hand patch at 0.9 m.
+        let mut depth = depth_of(&[], z, 0);
+        let (hu, hv) = INTR.project(&palm).unwrap();
+        for y in hv as usize - 6..=hv as usize + 6 {
+            for x in hu as usize - 6..=hu as usize + 6 {
+                depth.data[y * 640 + x] = 900;
+            }
+        }
+        let landmarks = Landmarks {
+            pose: Some(pose),
+            face: None,
+            hands: vec![hand],
+        };
+        // Camera 1.5 m up, looking along world +x, tilted so that camera z is world +x:
+        // world = R · camera + t with camera x → world −y, camera y → world −z.
+        let rot = Rotation3::from_matrix_unchecked(nalgebra::Matrix3::new(
+            0.0, 0.0, 1.0, //
+            -1.0, 0.0, 0.0, //
+            0.0, -1.0, 0.0,
+        ));
+        let ext = Extrinsics {
+            world_from_camera: Isometry3::from_parts(
+                Translation3::new(0.0, 0.0, 1.5),
+                UnitQuaternion::from_rotation_matrix(&rot),
+            ),
+        };
+        let mut x = CueExtractor::new(CueConfig::default(), ext, canonical()).unwrap();
+        let c = x.extract(0.0, &landmarks, Some(&depth), &INTR);
+        let body = c.frame.body.unwrap();
+        // Shoulder midpoint (0, 0, 1.2) in the camera → world (1.2, 0, 1.5).
+        assert!((body.position - Vector3::new(1.2, 0.0, 1.5)).norm() < 0.01);
+        // Chest normal (0, 0, −1) in the camera → world (−1, 0, 0): facing the camera.
+        let f = body.facing.normalize();
+        assert!(
+            f.angle(&Vector3::new(-1.0, 0.0, 0.0)).to_degrees() < 1.0,
+            "{f:?}"
+        );
+        assert!((body.confidence - 0.95).abs() < 1e-9);
+        // The hand is nearest the pose's left wrist (15) → slot 0 (left); at 0.9 m.
+        let h = c.frame.hands[0].unwrap();
+        let want = ext.point_to_world(&Point3::new(0.25 + 0.002, 0.3, 0.9));
+        assert!(
+            (Point3::from(h.position) - want).norm() < 0.01,
+            "{:?}",
+            h.position
+        );
+        // The right hand has no landmarks: the pose's right wrist stands in, half confidence.
+        let rh = c.frame.hands[1].unwrap();
+        assert!((rh.confidence - 0.5 * 0.95).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_jump_faster_than_max_speed_lowers_confidence() {
+        let mut t = Track::default();
+        assert_eq!(t.factor(0.0, Point3::origin(), 3.0), 1.0);
+        // 0.05 m in 1/30 s = 1.5 m/s: consistent.
+        assert_eq!(t.factor(1.0 / 30.0, Point3::new(0.05, 0.0, 0.0), 3.0), 1.0);
+        // 0.5 m in 1/30 s = 15 m/s: factor 3 / 15 = 0.2.
+        let f = t.factor(2.0 / 30.0, Point3::new(0.55, 0.0, 0.0), 3.0);
+        assert!((f - 0.2).abs() < 1e-9);
+        // After a gap (> 0.5 s) the cue starts afresh.
+        assert_eq!(t.factor(5.0, Point3::new(9.0, 0.0, 0.0), 3.0), 1.0);
+    }
+
+    #[test]
+    fn canonical_face_file_errors_name_the_line() {
+        let dir = std::env::temp_dir().join(format!("hrc-canon-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("c.csv");
+        std::fs::write(&p, "index,x,y,z\n0,1,2,3\n1,1,x,3\n").unwrap();
+        let e = load_canonical_face(&p).unwrap_err().to_string();
+        assert!(e.contains(":3:3"), "{e}");
+        std::fs::write(&p, "index,x,y,z\n0,1,2,3\n").unwrap();
+        let e = load_canonical_face(&p).unwrap_err().to_string();
+        assert!(e.contains("468"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
