@@ -122,6 +122,69 @@ pub struct StageTimes {
     pub total_us: u64,
 }
 
+/// How often each model has run since the pipeline was loaded (detectors run only when
+/// tracking is lost; landmark models at their staggered rates).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RunCounts {
+    /// Frames processed.
+    pub frames: u64,
+    /// Pose detector runs.
+    pub pose_detector: u64,
+    /// Face detector runs.
+    pub face_detector: u64,
+    /// Palm detector runs.
+    pub palm_detector: u64,
+    /// Pose landmark model runs.
+    pub pose_landmarks: u64,
+    /// Face landmark model runs.
+    pub face_landmarks: u64,
+    /// Hand landmark model runs.
+    pub hand_landmarks: u64,
+}
+
+/// MediaPipe's One-Euro filter as its `LandmarksSmoothingCalculator` applies it (not the
+/// classic one of `crate::filter`): values in pixels, the derivative scaled by 1 / object size
+/// [1/px], the rate from the frame timestamps. Used on the pose's two auxiliary landmarks,
+/// which MediaPipe always smooths (min cutoff 0.01 Hz, β 10, derivative cutoff 1 Hz) so that
+/// the tracked pose ROI is steady.
+#[derive(Debug, Clone, Copy, Default)]
+struct MpOneEuro {
+    x: Option<(f64, f64)>,
+    dx: Option<f64>,
+}
+
+impl MpOneEuro {
+    const MIN_CUTOFF: f64 = 0.01;
+    const BETA: f64 = 10.0;
+    const D_CUTOFF: f64 = 1.0;
+
+    fn alpha(cutoff: f64, rate_hz: f64) -> f64 {
+        let te = 1.0 / rate_hz;
+        let tau = 1.0 / (2.0 * std::f64::consts::PI * cutoff);
+        1.0 / (1.0 + tau / te)
+    }
+
+    /// Filters `value` [px] at `rate_hz` with `value_scale` [1/px].
+    fn apply(&mut self, value: f64, rate_hz: f64, value_scale: f64) -> f64 {
+        let dvalue = self
+            .x
+            .map_or(0.0, |(raw, _)| (value - raw) * value_scale * rate_hz);
+        let a_d = Self::alpha(Self::D_CUTOFF, rate_hz);
+        let edvalue = match self.dx {
+            Some(prev) => a_d * dvalue + (1.0 - a_d) * prev,
+            None => dvalue,
+        };
+        self.dx = Some(edvalue);
+        let a = Self::alpha(Self::MIN_CUTOFF + Self::BETA * edvalue.abs(), rate_hz);
+        let out = match self.x {
+            Some((_, prev)) => a * value + (1.0 - a) * prev,
+            None => value,
+        };
+        self.x = Some((value, out));
+        out
+    }
+}
+
 /// Sigmoid.
 fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
@@ -414,8 +477,8 @@ const HAND_TRACK_ROI: RectTransform = RectTransform {
     square_long: true,
 };
 const HAND_FROM_POSE_ROI: RectTransform = RectTransform {
-    scale_x: 2.7,
-    scale_y: 2.7,
+    scale_x: 2.0,
+    scale_y: 2.0,
     shift_x: 0.0,
     shift_y: -0.1,
     square_long: true,
@@ -510,7 +573,11 @@ pub fn hand_rect_from_landmarks(points: &[[f32; 2]], image: (u32, u32)) -> Optio
 
 /// A hand ROI from the pose's wrist, index and pinky landmarks (MediaPipe Holistic's
 /// `HandDetectionsFromPoseToRectsCalculator`): centred on the estimated middle knuckle, side
-/// twice its distance to the wrist, rotated wrist → knuckle to 90°.
+/// twice its distance to the wrist, rotated wrist → knuckle to 90°, then scaled 2.0 with
+/// shift −0.1 like the hand-landmark tracking ROI. (Holistic scales by 2.7 because it refines
+/// the crop with a re-crop model we don't have; fed straight to the landmark model, 2.7 gave
+/// landmarks 15 px from mediapipe's palm-detection path on `pose_sitting.jpg`, 2.0 gives
+/// 3.7 px, and tracking then converges to mediapipe's within a frame.)
 pub fn hand_rect_from_pose(
     wrist: [f32; 2],
     index: [f32; 2],
@@ -564,6 +631,13 @@ pub struct Pipeline {
     hands: [HandTrack; 2],
     frame: u64,
     times: StageTimes,
+    runs: RunCounts,
+    /// Smoothing of the pose's auxiliary landmarks 33, 34 (x, y each).
+    aux_filters: [MpOneEuro; 4],
+    /// Time of the previous frame [s].
+    last_t: Option<f64>,
+    /// Time of the current frame [s].
+    now: f64,
 }
 
 impl Pipeline {
@@ -626,12 +700,21 @@ impl Pipeline {
             hands: [HandTrack::default(), HandTrack::default()],
             frame: 0,
             times: StageTimes::default(),
+            runs: RunCounts::default(),
+            aux_filters: [MpOneEuro::default(); 4],
+            last_t: None,
+            now: 0.0,
         })
     }
 
     /// The settings.
     pub fn config(&self) -> &PipelineConfig {
         &self.config
+    }
+
+    /// How often each model has run.
+    pub fn run_counts(&self) -> RunCounts {
+        self.runs
     }
 
     /// Stage times of the last frame.
@@ -659,16 +742,35 @@ impl Pipeline {
     /// Forgets all tracking state (the next frame runs the detectors).
     pub fn reset(&mut self) {
         self.pose_rect = None;
+        self.aux_filters = [MpOneEuro::default(); 4];
         self.face_rect = None;
         self.last_face = None;
         self.hands = [HandTrack::default(), HandTrack::default()];
     }
 
-    /// Finds the operator's landmarks on one frame. `depth`, aligned to `image`, is used to
-    /// choose the nearest person. An empty or malformed image gives empty landmarks and
-    /// resets tracking.
+    /// [`Pipeline::process_at`] for frames at a nominal 30 fps (the frame counter gives the
+    /// time).
     pub fn process(&mut self, image: &RgbImage, depth: Option<&DepthImage>) -> Result<Landmarks> {
+        let t = self.last_t.map_or(0.0, |t| t + 1.0 / 30.0);
+        self.process_at(t, image, depth)
+    }
+
+    /// Finds the operator's landmarks on the frame taken at camera time `t` [s] (used to
+    /// smooth the tracked pose ROI; must increase). `depth`, aligned to `image`, is used to
+    /// choose the nearest person. An empty or malformed image gives empty landmarks and resets
+    /// tracking.
+    pub fn process_at(
+        &mut self,
+        t: f64,
+        image: &RgbImage,
+        depth: Option<&DepthImage>,
+    ) -> Result<Landmarks> {
         let start = Instant::now();
+        if self.last_t.is_some_and(|last| !(t > last)) {
+            // Time going backwards or standing still: a new sequence.
+            self.reset();
+        }
+        self.now = t;
         self.times = StageTimes::default();
         let mut out = Landmarks::default();
         if !image.is_well_formed() {
@@ -691,6 +793,8 @@ impl Pipeline {
         }
         let _ = size;
         self.frame += 1;
+        self.runs.frames += 1;
+        self.last_t = Some(t);
         self.times.total_us = micros(start);
         Ok(out)
     }
@@ -707,6 +811,7 @@ impl Pipeline {
                 None => {
                     let t = Instant::now();
                     let dets = self.pose_detector.detect(image)?;
+                    self.runs.pose_detector += 1;
                     self.times.pose_detection_us += micros(t);
                     let Some(d) = choose_operator(&dets, size, depth) else {
                         return Ok(None);
@@ -719,6 +824,7 @@ impl Pipeline {
             };
             let t = Instant::now();
             let (raw, flag, _) = self.pose_model.run(image, &rect)?;
+            self.runs.pose_landmarks += 1;
             self.times.pose_landmarks_us += micros(t);
             if flag < self.config.min_presence_score || raw.len() < 39 * 5 {
                 // Lost: detect again at once (a tracked ROI) or give up (a detected one).
@@ -730,9 +836,10 @@ impl Pipeline {
             }
             let all = self.pose_model.project(&raw, &rect, size, true);
             let norm = normalised(&all, size);
-            // Auxiliary landmarks 33 (body centre) and 34 (scale) give the next ROI.
+            // Auxiliary landmarks 33 (body centre) and 34 (scale), smoothed, give the next ROI.
             self.pose_rect = if self.config.mode == Mode::Tracking {
-                rect_from_points_opt(&norm, 33, 34, size).map(|r| r.transformed(&POSE_ROI, size))
+                let aux = self.smooth_aux(&all, size);
+                rect_from_points_opt(&aux, 0, 1, size).map(|r| r.transformed(&POSE_ROI, size))
             } else {
                 None
             };
@@ -745,6 +852,44 @@ impl Pipeline {
             }));
         }
         Ok(None)
+    }
+
+    /// The auxiliary landmarks 33 and 34, smoothed as MediaPipe does, normalised.
+    fn smooth_aux(&mut self, all: &[Landmark], size: (u32, u32)) -> Vec<[f32; 2]> {
+        let (Some(a), Some(b)) = (all.get(33), all.get(34)) else {
+            return Vec::new();
+        };
+        let rate = match self.last_t {
+            Some(last) if self.now > last => 1.0 / (self.now - last),
+            _ => 30.0,
+        };
+        // Object scale: mean of the bounding-box sides of the 33 body landmarks [px].
+        let body = &all[..33.min(all.len())];
+        let (x0, x1) = body.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
+            (lo.min(p.x), hi.max(p.x))
+        });
+        let (y0, y1) = body.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
+            (lo.min(p.y), hi.max(p.y))
+        });
+        let scale = ((x1 - x0) + (y1 - y0)) / 2.0;
+        if scale < 1e-6 {
+            return normalised(&[*a, *b], size);
+        }
+        let vs = 1.0 / scale;
+        let f = &mut self.aux_filters;
+        let pts = [
+            Landmark {
+                x: f[0].apply(a.x, rate, vs),
+                y: f[1].apply(a.y, rate, vs),
+                ..*a
+            },
+            Landmark {
+                x: f[2].apply(b.x, rate, vs),
+                y: f[3].apply(b.y, rate, vs),
+                ..*b
+            },
+        ];
+        normalised(&pts, size)
     }
 
     fn face(
@@ -768,6 +913,7 @@ impl Pipeline {
                 None => {
                     let t = Instant::now();
                     let dets = self.face_detector.detect(image)?;
+                    self.runs.face_detector += 1;
                     self.times.face_detection_us += micros(t);
                     let chosen = match pose {
                         // The face nearest the operator's nose.
@@ -786,6 +932,7 @@ impl Pipeline {
             };
             let t = Instant::now();
             let (raw, flag, _) = self.face_model.run(image, &rect)?;
+            self.runs.face_landmarks += 1;
             self.times.face_landmarks_us += micros(t);
             let score = sigmoid(flag);
             if score < self.config.min_presence_score || raw.len() < 468 * 3 {
@@ -847,6 +994,7 @@ impl Pipeline {
         if missing > 0 && palm_due {
             let t = Instant::now();
             let dets = self.palm_detector.detect(image)?;
+            self.runs.palm_detector += 1;
             self.times.palm_detection_us += micros(t);
             for d in dets.iter().take(2) {
                 if let Some(r) = rect_from_box(d, size, 0, 2, 90.0) {
@@ -893,6 +1041,7 @@ impl Pipeline {
                 continue;
             }
             let (raw, flag, handed) = self.hand_model.run(image, &rect)?;
+            self.runs.hand_landmarks += 1;
             if flag < self.config.min_presence_score || raw.len() < 21 * 3 {
                 continue;
             }
