@@ -2,6 +2,8 @@
 //! module and calls into the library crates.
 
 mod assess_cmd;
+#[cfg(feature = "vision")]
+mod calibrate_cmd;
 mod experiment;
 mod report;
 mod robot_cmd;
@@ -22,6 +24,9 @@ struct Cli {
 enum Command {
     /// Assess a recording offline: cues → indicators.csv and plots.
     Assess(assess_cmd::AssessArgs),
+    /// Calibrate the camera against the ChArUco board (extrinsics file), or print the board.
+    #[cfg(feature = "vision")]
+    Calibrate(calibrate_cmd::CalibrateArgs),
     /// Record a live UR controller (or the emulator) over RTDE into a CSV trace.
     Record(robot_cmd::RecordArgs),
     /// Serve a UR controller emulator (RTDE, dashboard, script ports) on loopback.
@@ -51,6 +56,8 @@ fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Assess(args) => assess_cmd::run(args),
+        #[cfg(feature = "vision")]
+        Command::Calibrate(args) => calibrate_cmd::run(args),
         Command::Record(args) => robot_cmd::record(args),
         Command::Emulate(args) => robot_cmd::emulate(args),
         Command::Trial(args) => trial::run(args),

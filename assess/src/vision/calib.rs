@@ -485,13 +485,27 @@ pub fn render_board(board: &BoardSpec, dpi: f64, margin_m: f64) -> Result<BoardP
     .map_err(&err)?;
     let mut image = rgb_from_mat(&gray, imgproc::COLOR_GRAY2RGB, "drawing the board")?;
     if margin_px / px_per_m >= 0.008 {
-        let y = h - margin_px / 2.0;
+        // A tick at the origin and a one-line legend in the bottom margin, 3 mm tall.
         let x0 = margin_px;
-        draw::line(&mut image, (x0, h - margin_px), (x0, y), [0, 0, 0], 2)?;
+        let y = h - margin_px * 0.3;
+        draw::line(&mut image, (x0, h - margin_px), (x0, h - 1.0), [0, 0, 0], 2)?;
         let label = format!(
-            "origin: this corner | x: right along this edge | y: up | z: out of the page | {board}"
+            "origin: this corner | x right, y up, z out of the page | {}x{}, {:.0}/{:.0} mm, {}",
+            board.squares_x,
+            board.squares_y,
+            board.square_m * 1e3,
+            board.marker_m * 1e3,
+            board.dictionary.name()
         );
-        draw::text(&mut image, &label, (x0 + 10.0, y + 5.0), [255, 255, 255])?;
+        // Hershey capitals advance about 0.9 of their height per character.
+        let fit = (w - 2.0 * margin_px) / (label.len() as f64 * 0.9);
+        draw::text_with_height(
+            &mut image,
+            &label,
+            (x0 + 0.3 * margin_px, y),
+            [255, 255, 255],
+            (0.003 * px_per_m).min(fit),
+        )?;
     }
     Ok(BoardPrint {
         image,

@@ -314,10 +314,37 @@ fn text_scale(img: &RgbImage) -> f64 {
 /// Draws one line of text with its baseline starting at `origin` [px], on a dark box for
 /// legibility. Text outside the image is clipped.
 pub fn text(img: &mut RgbImage, s: &str, origin: (f64, f64), colour: Colour) -> Result<()> {
+    let scale = text_scale(img);
+    text_at_scale(img, s, origin, colour, scale)
+}
+
+/// Like [`text`], with capital letters about `height` [px] tall (at least 4 px).
+pub fn text_with_height(
+    img: &mut RgbImage,
+    s: &str,
+    origin: (f64, f64),
+    colour: Colour,
+    height: f64,
+) -> Result<()> {
+    // Hershey simplex capitals are 22 px tall at scale 1.
+    let scale = if height.is_finite() {
+        height.max(4.0) / 22.0
+    } else {
+        1.0
+    };
+    text_at_scale(img, s, origin, colour, scale)
+}
+
+fn text_at_scale(
+    img: &mut RgbImage,
+    s: &str,
+    origin: (f64, f64),
+    colour: Colour,
+    scale: f64,
+) -> Result<()> {
     if !(origin.0.is_finite() && origin.1.is_finite()) {
         return Ok(());
     }
-    let scale = text_scale(img);
     let thickness = if scale > 1.0 { 2 } else { 1 };
     let (x0, y0, x1, y1) = bounds(img);
     let org = Point::new(

@@ -207,3 +207,18 @@ impl FrameSource for ImageFolderSource {
         self.depth.is_some()
     }
 }
+
+/// Reads one image file (any format OpenCV decodes) as RGB. Errors name the file.
+pub fn read_image(path: impl AsRef<Path>) -> Result<crate::vision::RgbImage> {
+    let path = path.as_ref();
+    let name = path.display().to_string();
+    if !path.is_file() {
+        return Err(source_err(&name, "no such image file"));
+    }
+    let mat = imgcodecs::imread(&name, imgcodecs::IMREAD_COLOR)
+        .map_err(|e| source_err(&name, e.message))?;
+    if mat.empty() {
+        return Err(source_err(&name, "cannot read or decode the image"));
+    }
+    rgb_from_decoded(&mat, &name)
+}
