@@ -63,18 +63,37 @@ fn synthetic_bag_gives_points_on_the_plane_and_the_planes_facing() {
         let mut worst = 0.0f64;
         let mut lifted = 0;
         for p in face.points.iter().chain(&pose.points[..13]) {
-            if let Some(q) = lift(depth, &frame.intrinsics, p.x, p.y, 1, (0.2, 4.0), &mut scratch) {
+            if let Some(q) = lift(
+                depth,
+                &frame.intrinsics,
+                p.x,
+                p.y,
+                1,
+                (0.2, 4.0),
+                &mut scratch,
+            ) {
                 worst = worst.max(on_plane(&q));
                 lifted += 1;
             }
         }
-        assert!(lifted > 400, "frame {}: only {lifted} landmarks lifted", frame.index);
-        assert!(worst < 0.01, "frame {}: a point is {worst:.4} m off the plane", frame.index);
+        assert!(
+            lifted > 400,
+            "frame {}: only {lifted} landmarks lifted",
+            frame.index
+        );
+        assert!(
+            worst < 0.01,
+            "frame {}: a point is {worst:.4} m off the plane",
+            frame.index
+        );
 
         let c = cues.extract(frame.t, &lm, Some(depth), &frame.intrinsics);
         assert_eq!(c.quality, CueQuality::Depth3d);
         let head = c.frame.head.expect("a head cue");
-        assert!(on_plane(&Point3::from(head.position)) < 0.15, "head centre behind the face");
+        assert!(
+            on_plane(&Point3::from(head.position)) < 0.15,
+            "head centre behind the face"
+        );
         let head_angle = head.facing.normalize().angle(&normal).to_degrees();
         let body = c.frame.body.expect("a body cue");
         assert!(on_plane(&Point3::from(body.position)) < 0.01);
@@ -86,8 +105,14 @@ fn synthetic_bag_gives_points_on_the_plane_and_the_planes_facing() {
             worst * 1000.0
         );
         // A flat photo is not a 3-D head: the canonical face's relief fits it only roughly.
-        assert!(head_angle < 15.0, "head facing {head_angle:.1}° from the plane normal");
-        assert!(body_angle < 15.0, "chest facing {body_angle:.1}° from the plane normal");
+        assert!(
+            head_angle < 15.0,
+            "head facing {head_angle:.1}° from the plane normal"
+        );
+        assert!(
+            body_angle < 15.0,
+            "chest facing {body_angle:.1}° from the plane normal"
+        );
     }
     assert_eq!(frames, scene["frames"].as_u64().unwrap() as usize);
 }

@@ -766,7 +766,7 @@ impl Pipeline {
         depth: Option<&DepthImage>,
     ) -> Result<Landmarks> {
         let start = Instant::now();
-        if self.last_t.is_some_and(|last| !(t > last)) {
+        if self.last_t.is_some_and(|last| t.is_nan() || t <= last) {
             // Time going backwards or standing still: a new sequence.
             self.reset();
         }
@@ -835,7 +835,6 @@ impl Pipeline {
                 return Ok(None);
             }
             let all = self.pose_model.project(&raw, &rect, size, true);
-            let norm = normalised(&all, size);
             // Auxiliary landmarks 33 (body centre) and 34 (scale), smoothed, give the next ROI.
             self.pose_rect = if self.config.mode == Mode::Tracking {
                 let aux = self.smooth_aux(&all, size);

@@ -321,7 +321,17 @@ impl RealSenseSource {
             .start(Some(rs_config))
             .map_err(|e| cannot(format!("{e} (does it hold a colour and a depth stream?)")))?;
         let description = format!("RealSense recording {name}");
-        Self::from_pipeline(name, description, pipeline, true)
+        let mut source = Self::from_pipeline(name, description, pipeline, true)?;
+        // Switch the playback to non-real-time now, not at the first `next_frame`: a caller
+        // that loads models between opening and reading (half a second) would otherwise find
+        // the whole recording played past in real time.
+        while source.playback.is_none() && !source.ended {
+            match source.wait_frameset()? {
+                Some(frames) => source.ingest(&frames)?,
+                None => source.ended = true,
+            }
+        }
+        Ok(source)
     }
 
     /// Reads what every source needs from a started pipeline.
