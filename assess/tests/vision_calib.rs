@@ -18,24 +18,6 @@ use opencv::core::{self, Mat, Scalar, Size, Vec3b};
 use opencv::prelude::*;
 use opencv::{imgcodecs, imgproc};
 
-/// A temporary folder removed on drop.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(name: &str) -> Self {
-        let p = std::env::temp_dir().join(format!("hrc-adapt-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).expect("temp dir");
-        Self(p)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
 fn intrinsics() -> Intrinsics {
     Intrinsics {
         width: 1280,
@@ -243,8 +225,8 @@ fn intrinsics_of_another_size_are_refused() {
 
 #[test]
 fn the_printed_board_has_its_size_and_is_detected() {
-    let dir = TempDir::new("board-png");
-    let path = dir.0.join("board.png");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("board.png");
     let board = BoardSpec::default();
     let print = calib::write_board_png(&board, &path, 300.0, 0.01).expect("write");
     // 40 mm at 300 dpi = 472.4 px, rounded to 472 px.
@@ -343,8 +325,8 @@ fn sample_file() -> ExtrinsicsFile {
 
 #[test]
 fn extrinsics_file_round_trips() {
-    let dir = TempDir::new("extrinsics-rt");
-    let path = dir.0.join("extrinsics.toml");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("extrinsics.toml");
     let file = sample_file();
     file.save(&path).expect("save");
     let text = std::fs::read_to_string(&path).expect("read");
@@ -416,8 +398,8 @@ fn extrinsics_validation_names_key_and_file() {
     .expect_err("unknown key");
     assert!(err.to_string().contains("translation"), "{err}");
 
-    let dir = TempDir::new("extrinsics-bad");
-    let path = dir.0.join("bad.toml");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("bad.toml");
     std::fs::write(
         &path,
         "[extrinsics]\nrotation_xyzw = [0.5, 0.5, 0.5, 0.6]\ntranslation_m = [0.0, 0.0, 0.0]\n",
@@ -428,7 +410,7 @@ fn extrinsics_validation_names_key_and_file() {
         msg.contains("bad.toml") && msg.contains("extrinsics.rotation_xyzw"),
         "{msg}"
     );
-    let msg = Extrinsics::load(dir.0.join("missing.toml"))
+    let msg = Extrinsics::load(dir.path().join("missing.toml"))
         .expect_err("missing")
         .to_string();
     assert!(msg.contains("missing.toml"), "{msg}");

@@ -8,166 +8,58 @@
 //! invalid depth. Needs librealsense2 (`scripts/setup`, then `source scripts/deps/env.sh`).
 #![cfg(feature = "realsense")]
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use assess::AssessError;
 use assess::vision::source::realsense::{RealSenseConfig, RealSenseSource, list_devices};
 use assess::vision::{CameraFrame, FrameSource, Intrinsics};
 use nalgebra::{Point3, Vector3};
+use serde_json::Value;
 
 fn bag_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/bag")
 }
 
-// --- A small JSON reader for the scene file (the crate has no JSON dependency). ---
-
-#[derive(Debug, Clone)]
-enum Json {
-    Null,
-    Bool(bool),
-    Num(f64),
-    Str(String),
-    Arr(Vec<Json>),
-    Obj(BTreeMap<String, Json>),
+/// Panicking accessors for the scene file (a test fixture: a missing key is a test failure).
+trait Json {
+    fn at(&self, key: &str) -> &Value;
+    fn f(&self) -> f64;
+    fn arr(&self) -> &[Value];
+    fn vec3(&self) -> Vector3<f64>;
+    fn bool(&self) -> bool;
+    fn str(&self) -> &str;
 }
 
-impl Json {
-    fn parse(text: &str) -> Json {
-        let bytes = text.as_bytes();
-        let mut pos = 0;
-        let value = parse_value(bytes, &mut pos);
-        skip_ws(bytes, &mut pos);
-        assert_eq!(pos, bytes.len(), "trailing characters in the JSON file");
-        value
-    }
-    fn get(&self, key: &str) -> &Json {
-        match self {
-            Json::Obj(m) => m.get(key).unwrap_or_else(|| panic!("no key {key:?}")),
-            _ => panic!("not an object when looking up {key:?}"),
-        }
+impl Json for Value {
+    fn at(&self, key: &str) -> &Value {
+        self.get(key).unwrap_or_else(|| panic!("no key {key:?}"))
     }
     fn f(&self) -> f64 {
-        match self {
-            Json::Num(x) => *x,
-            other => panic!("not a number: {other:?}"),
-        }
+        self.as_f64()
+            .unwrap_or_else(|| panic!("not a number: {self}"))
     }
-    fn arr(&self) -> &[Json] {
-        match self {
-            Json::Arr(v) => v,
-            other => panic!("not an array: {other:?}"),
-        }
+    fn arr(&self) -> &[Value] {
+        self.as_array()
+            .unwrap_or_else(|| panic!("not an array: {self}"))
     }
     fn vec3(&self) -> Vector3<f64> {
         let a = self.arr();
-        assert_eq!(a.len(), 3);
         Vector3::new(a[0].f(), a[1].f(), a[2].f())
     }
     fn bool(&self) -> bool {
-        match self {
-            Json::Bool(b) => *b,
-            other => panic!("not a bool: {other:?}"),
-        }
+        self.as_bool()
+            .unwrap_or_else(|| panic!("not a bool: {self}"))
     }
     fn str(&self) -> &str {
-        match self {
-            Json::Str(s) => s,
-            other => panic!("not a string: {other:?}"),
-        }
-    }
-}
-
-fn skip_ws(b: &[u8], pos: &mut usize) {
-    while *pos < b.len() && b[*pos].is_ascii_whitespace() {
-        *pos += 1;
-    }
-}
-
-fn parse_value(b: &[u8], pos: &mut usize) -> Json {
-    skip_ws(b, pos);
-    match b[*pos] {
-        b'{' => {
-            *pos += 1;
-            let mut map = BTreeMap::new();
-            loop {
-                skip_ws(b, pos);
-                if b[*pos] == b'}' {
-                    *pos += 1;
-                    return Json::Obj(map);
-                }
-                let Json::Str(key) = parse_value(b, pos) else {
-                    panic!("object key is not a string")
-                };
-                skip_ws(b, pos);
-                assert_eq!(b[*pos], b':');
-                *pos += 1;
-                map.insert(key, parse_value(b, pos));
-                skip_ws(b, pos);
-                if b[*pos] == b',' {
-                    *pos += 1;
-                }
-            }
-        }
-        b'[' => {
-            *pos += 1;
-            let mut items = Vec::new();
-            loop {
-                skip_ws(b, pos);
-                if b[*pos] == b']' {
-                    *pos += 1;
-                    return Json::Arr(items);
-                }
-                items.push(parse_value(b, pos));
-                skip_ws(b, pos);
-                if b[*pos] == b',' {
-                    *pos += 1;
-                }
-            }
-        }
-        b'"' => {
-            *pos += 1;
-            let start = *pos;
-            while b[*pos] != b'"' {
-                assert_ne!(b[*pos], b'\\', "escapes are not used in the scene file");
-                *pos += 1;
-            }
-            let s = std::str::from_utf8(&b[start..*pos]).expect("utf-8");
-            *pos += 1;
-            Json::Str(s.to_string())
-        }
-        b't' if b[*pos..].starts_with(b"true") => {
-            *pos += 4;
-            Json::Bool(true)
-        }
-        b'f' if b[*pos..].starts_with(b"false") => {
-            *pos += 5;
-            Json::Bool(false)
-        }
-        b'n' if b[*pos..].starts_with(b"null") => {
-            *pos += 4;
-            Json::Null
-        }
-        _ => {
-            let start = *pos;
-            while *pos < b.len()
-                && matches!(b[*pos], b'0'..=b'9' | b'-' | b'+' | b'.' | b'e' | b'E')
-            {
-                *pos += 1;
-            }
-            let text = std::str::from_utf8(&b[start..*pos]).expect("utf-8");
-            Json::Num(
-                text.parse()
-                    .unwrap_or_else(|_| panic!("bad number {text:?}")),
-            )
-        }
+        self.as_str()
+            .unwrap_or_else(|| panic!("not a string: {self}"))
     }
 }
 
 // --- The scene. ---
 
 struct Scene {
-    json: Json,
+    json: Value,
     intrinsics: Intrinsics,
     centre: Vector3<f64>,
     normal: Vector3<f64>,
@@ -181,29 +73,29 @@ impl Scene {
     fn load() -> Scene {
         let text = std::fs::read_to_string(bag_dir().join("synthetic_plane.json"))
             .expect("data/bag/synthetic_plane.json");
-        let json = Json::parse(&text);
+        let json: Value = serde_json::from_str(&text).expect("the scene file is JSON");
         assert!(
-            json.get("simulated").bool(),
+            json.at("simulated").bool(),
             "the fixture is labelled simulated"
         );
-        let ci = json.get("color_intrinsics");
+        let ci = json.at("color_intrinsics");
         let intrinsics = Intrinsics {
-            width: ci.get("width").f() as u32,
-            height: ci.get("height").f() as u32,
-            fx: ci.get("fx").f(),
-            fy: ci.get("fy").f(),
-            cx: ci.get("cx").f(),
-            cy: ci.get("cy").f(),
+            width: ci.at("width").f() as u32,
+            height: ci.at("height").f() as u32,
+            fx: ci.at("fx").f(),
+            fy: ci.at("fy").f(),
+            cx: ci.at("cx").f(),
+            cy: ci.at("cy").f(),
         };
-        let plane = json.get("plane");
+        let plane = json.at("plane");
         Scene {
             intrinsics,
-            centre: plane.get("centre_m").vec3(),
-            normal: plane.get("normal").vec3().normalize(),
-            right: plane.get("texture_right").vec3(),
-            down: plane.get("texture_down").vec3(),
-            width_m: plane.get("width_m").f(),
-            height_m: plane.get("height_m").f(),
+            centre: plane.at("centre_m").vec3(),
+            normal: plane.at("normal").vec3().normalize(),
+            right: plane.at("texture_right").vec3(),
+            down: plane.at("texture_down").vec3(),
+            width_m: plane.at("width_m").f(),
+            height_m: plane.at("height_m").f(),
             json,
         }
     }
@@ -241,7 +133,7 @@ impl Scene {
 
     fn invalid_boxes(&self) -> Vec<[u32; 4]> {
         self.json
-            .get("invalid_depth_boxes_px")
+            .at("invalid_depth_boxes_px")
             .arr()
             .iter()
             .map(|b| {
@@ -287,7 +179,7 @@ fn rgb(frame: &CameraFrame, u: u32, v: u32) -> [u8; 3] {
 fn reference_rgb(scene: &Scene) -> Vec<u8> {
     use opencv::core::{Mat, MatTraitConst, MatTraitConstManual};
     use opencv::imgcodecs;
-    let path = bag_dir().join(scene.json.get("color_png").str());
+    let path = bag_dir().join(scene.json.at("color_png").str());
     let bgr: Mat = imgcodecs::imread(path.to_str().expect("utf-8 path"), imgcodecs::IMREAD_COLOR)
         .expect("read the reference png");
     assert_eq!(bgr.cols() as u32, scene.intrinsics.width);
@@ -307,15 +199,15 @@ fn synthetic_bag_plays_every_frame_with_aligned_depth_and_true_colours() {
     assert!(source.has_depth());
     assert!(source.describe().contains("synthetic_plane.bag"));
     assert_eq!(source.intrinsics(), scene.intrinsics);
-    let scale = scene.json.get("depth_scale_m").f();
+    let scale = scene.json.at("depth_scale_m").f();
     // librealsense stores the depth scale as f32.
     assert!((source.depth_scale_m() - scale).abs() < 1e-9 * scale.max(1.0) + 1e-10);
 
     let frames = read_all(&mut source);
 
     // Every recorded frame, in order, at the recorded times, with depth.
-    let times = scene.json.get("timestamps_ms").arr();
-    assert_eq!(frames.len(), scene.json.get("frames").f() as usize);
+    let times = scene.json.at("timestamps_ms").arr();
+    assert_eq!(frames.len(), scene.json.at("frames").f() as usize);
     assert_eq!(frames.len(), times.len());
     for (k, (frame, t_ms)) in frames.iter().zip(times).enumerate() {
         assert_eq!(frame.index, k as u64);
@@ -351,23 +243,23 @@ fn synthetic_bag_plays_every_frame_with_aligned_depth_and_true_colours() {
     }
     // The patches' centres, where the texture says they are: pure red and pure blue (a reader
     // that swapped R and B, e.g. trusting realsense-rust's `Bgr8` label, fails here).
-    for patch in scene.json.get("patches").arr() {
-        let b = patch.get("texture_box").arr();
+    for patch in scene.json.at("patches").arr() {
+        let b = patch.at("texture_box").arr();
         let (fx, fy) = ((b[0].f() + b[2].f()) / 2.0, (b[1].f() + b[3].f()) / 2.0);
         let (u, v) = scene.texture_pixel(fx, fy);
-        let want: Vec<u8> = patch.get("rgb").arr().iter().map(|c| c.f() as u8).collect();
+        let want: Vec<u8> = patch.at("rgb").arr().iter().map(|c| c.f() as u8).collect();
         for frame in &frames {
             assert_eq!(
                 rgb(frame, u, v).to_vec(),
                 want,
                 "{} patch at ({u}, {v})",
-                patch.get("name").str()
+                patch.at("name").str()
             );
         }
     }
     let grey: Vec<u8> = scene
         .json
-        .get("background_rgb")
+        .at("background_rgb")
         .arr()
         .iter()
         .map(|c| c.f() as u8)
@@ -449,7 +341,7 @@ fn depth_is_aligned_to_colour_not_raw() {
     // about fx * 15 mm / 1 m ≈ 9 px, which on the turned plane is several millimetres. Check
     // that the fixture really makes that difference, so the test above can catch it.
     let scene = Scene::load();
-    let t = scene.json.get("depth_to_color_translation_m").vec3();
+    let t = scene.json.at("depth_to_color_translation_m").vec3();
     let shift_px = scene.intrinsics.fx * t.x.abs() / scene.centre.z;
     assert!(
         shift_px > 5.0,

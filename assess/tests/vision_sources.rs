@@ -2,7 +2,7 @@
 //! OpenCV into a temporary folder and read back.
 #![cfg(feature = "vision")]
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use assess::AssessError;
 use assess::vision::source::capture::{
@@ -16,28 +16,6 @@ use opencv::{imgcodecs, imgproc, videoio};
 
 const W: i32 = 160;
 const H: i32 = 120;
-
-/// A temporary folder removed on drop.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(name: &str) -> Self {
-        let p = std::env::temp_dir().join(format!("hrc-adapt-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).expect("temp dir");
-        Self(p)
-    }
-
-    fn path(&self, rel: &str) -> PathBuf {
-        self.0.join(rel)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
 
 /// A BGR frame: a pure-red 40 x 40 patch at the top left, pure blue at the top right, the rest
 /// grey at a level that changes with k.
@@ -145,8 +123,8 @@ fn assert_red_and_blue(f: &CameraFrame, tolerance: u8) {
 
 #[test]
 fn video_file_reads_back_sizes_colours_and_times() {
-    let dir = TempDir::new("video");
-    let path = dir.path("clip.avi");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("clip.avi");
     write_video(&path, 10, 25.0);
     let mut src = VideoFileSource::open(&path, VideoFileOptions::default()).expect("open");
     assert!(!src.has_depth());
@@ -180,13 +158,13 @@ fn video_file_reads_back_sizes_colours_and_times() {
 
 #[test]
 fn video_file_with_depth_sequence_and_intrinsics() {
-    let dir = TempDir::new("video-depth");
-    let path = dir.path("clip.avi");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("clip.avi");
     write_video(&path, 6, 30.0);
     let stems: Vec<String> = (0..6).map(|k| format!("{k:06}")).collect();
-    write_depth(&dir.path("depth"), &stems, true);
+    write_depth(&dir.path().join("depth"), &stems, true);
     let opts = VideoFileOptions {
-        depth: Some(dir.path("depth")),
+        depth: Some(dir.path().join("depth")),
         ..VideoFileOptions::default()
     };
     let mut src = VideoFileSource::open(&path, opts.clone()).expect("open");
@@ -230,7 +208,7 @@ fn video_file_with_depth_sequence_and_intrinsics() {
         "{msg}"
     );
     // A missing depth PNG is an error naming it, at that frame.
-    std::fs::remove_file(dir.path("depth/000003.png")).expect("rm");
+    std::fs::remove_file(dir.path().join("depth/000003.png")).expect("rm");
     let mut src = VideoFileSource::open(&path, opts).expect("open");
     for _ in 0..3 {
         src.next_frame().expect("frames 0-2").expect("some");
@@ -244,32 +222,32 @@ fn video_file_with_depth_sequence_and_intrinsics() {
 
 #[test]
 fn broken_video_files_are_errors_not_panics() {
-    let dir = TempDir::new("video-broken");
-    let good = dir.path("clip.avi");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let good = dir.path().join("clip.avi");
     write_video(&good, 5, 25.0);
     let bytes = std::fs::read(&good).expect("read");
 
-    let empty = dir.path("empty.avi");
+    let empty = dir.path().join("empty.avi");
     std::fs::write(&empty, b"").expect("write");
     let err = VideoFileSource::open(&empty, VideoFileOptions::default()).expect_err("empty");
     assert!(matches!(err, AssessError::Source { .. }));
     assert!(err.to_string().contains("empty.avi"), "{err}");
 
-    let missing = VideoFileSource::open(dir.path("nope.avi"), VideoFileOptions::default())
+    let missing = VideoFileSource::open(dir.path().join("nope.avi"), VideoFileOptions::default())
         .expect_err("missing");
     assert!(missing.to_string().contains("nope.avi"), "{missing}");
 
-    let garbage = dir.path("garbage.avi");
+    let garbage = dir.path().join("garbage.avi");
     std::fs::write(&garbage, vec![0x5a; 4096]).expect("write");
     assert_unreadable(&garbage);
 
     // Only the first 200 bytes (the RIFF header, no frame).
-    let truncated = dir.path("truncated.avi");
+    let truncated = dir.path().join("truncated.avi");
     std::fs::write(&truncated, &bytes[..200]).expect("write");
     assert_unreadable(&truncated);
 
     // Cut in the middle: whatever decodes is returned, then the stream ends; no panic.
-    let half = dir.path("half.avi");
+    let half = dir.path().join("half.avi");
     std::fs::write(&half, &bytes[..bytes.len() / 2]).expect("write");
     if let Ok(mut src) = VideoFileSource::open(&half, VideoFileOptions::default()) {
         let mut n = 0;
@@ -293,8 +271,8 @@ fn assert_unreadable(path: &Path) {
 
 #[test]
 fn image_folder_reads_sorted_images_with_depth() {
-    let dir = TempDir::new("folder");
-    let images = dir.path("images");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let images = dir.path().join("images");
     std::fs::create_dir_all(images.join("subfolder")).expect("dirs");
     // Written out of order; one JPEG among PNGs; a non-image file and a subfolder to ignore.
     for (k, ext) in [(2, "png"), (0, "png"), (1, "JPG"), (3, "png")] {
@@ -310,11 +288,11 @@ fn image_folder_reads_sorted_images_with_depth() {
     }
     std::fs::write(images.join("notes.txt"), "not an image").expect("txt");
     let stems: Vec<String> = (0..4).map(|k| format!("{k:06}")).collect();
-    write_depth(&dir.path("depth"), &stems, false);
+    write_depth(&dir.path().join("depth"), &stems, false);
 
     let opts = ImageFolderOptions {
         fps: 10.0,
-        depth: Some(dir.path("depth")),
+        depth: Some(dir.path().join("depth")),
         ..ImageFolderOptions::default()
     };
     let mut src = ImageFolderSource::open(&images, opts).expect("open");
@@ -346,12 +324,12 @@ fn image_folder_reads_sorted_images_with_depth() {
 
 #[test]
 fn image_folder_errors_name_the_file_and_do_not_panic() {
-    let dir = TempDir::new("folder-broken");
-    let images = dir.path("images");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let images = dir.path().join("images");
     std::fs::create_dir_all(&images).expect("dir");
     let err = ImageFolderSource::open(&images, ImageFolderOptions::default()).expect_err("empty");
     assert!(err.to_string().contains("no image files"), "{err}");
-    let err = ImageFolderSource::open(dir.path("nope"), ImageFolderOptions::default())
+    let err = ImageFolderSource::open(dir.path().join("nope"), ImageFolderOptions::default())
         .expect_err("missing");
     assert!(err.to_string().contains("nope"), "{err}");
 
@@ -382,7 +360,7 @@ fn image_folder_errors_name_the_file_and_do_not_panic() {
     assert!(src.next_frame().expect("end").is_none());
 
     // A depth image of the wrong size names the depth file.
-    let depth = dir.path("depth");
+    let depth = dir.path().join("depth");
     std::fs::create_dir_all(&depth).expect("dir");
     std::fs::write(depth.join("depth.toml"), "scale_m = 0.001\n").expect("toml");
     let small = DepthImage {
@@ -403,7 +381,7 @@ fn image_folder_errors_name_the_file_and_do_not_panic() {
 
 #[test]
 fn depth_toml_is_validated() {
-    let dir = TempDir::new("depth-toml");
+    let dir = tempfile::tempdir().expect("temp dir");
     let cases = [
         ("scale_m = 0.0\n", "scale_m"),
         (
@@ -417,15 +395,17 @@ fn depth_toml_is_validated() {
         ("scale = 0.001\n", "scale"),
     ];
     for (text, key) in cases {
-        std::fs::write(dir.path("depth.toml"), text).expect("write");
-        let msg = DepthSequence::open(&dir.0).expect_err(text).to_string();
+        std::fs::write(dir.path().join("depth.toml"), text).expect("write");
+        let msg = DepthSequence::open(dir.path())
+            .expect_err(text)
+            .to_string();
         assert!(
             msg.contains(key) && msg.contains("depth.toml"),
             "{text}: {msg}"
         );
     }
-    std::fs::remove_file(dir.path("depth.toml")).expect("rm");
-    let msg = DepthSequence::open(&dir.0)
+    std::fs::remove_file(dir.path().join("depth.toml")).expect("rm");
+    let msg = DepthSequence::open(dir.path())
         .expect_err("no toml")
         .to_string();
     assert!(msg.contains("depth.toml"), "{msg}");
@@ -433,8 +413,8 @@ fn depth_toml_is_validated() {
 
 #[test]
 fn depth_png_round_trips_16_bit_values() {
-    let dir = TempDir::new("depth-png");
-    std::fs::write(dir.path("depth.toml"), "scale_m = 0.0001\n").expect("toml");
+    let dir = tempfile::tempdir().expect("temp dir");
+    std::fs::write(dir.path().join("depth.toml"), "scale_m = 0.0001\n").expect("toml");
     let data: Vec<u16> = (0..64u16).map(|i| i * 1000 + 7).collect();
     let img = DepthImage {
         width: 16,
@@ -442,13 +422,13 @@ fn depth_png_round_trips_16_bit_values() {
         data: data.clone(),
         scale_m: 0.0001,
     };
-    write_depth_png(&img, dir.path("000000.png")).expect("write");
-    let seq = DepthSequence::open(&dir.0).expect("open");
+    write_depth_png(&img, dir.path().join("000000.png")).expect("write");
+    let seq = DepthSequence::open(dir.path()).expect("open");
     let back = seq.read(&seq.frame_path(0), 16, 4).expect("read");
     assert_eq!(back.data, data);
     assert_eq!(back.depth_m(1, 0), Some(1007.0 * 0.0001));
     // An 8-bit PNG is not depth.
-    let p = dir.path("000001.png");
+    let p = dir.path().join("000001.png");
     imgcodecs::imwrite(
         p.to_str().expect("utf-8"),
         &bgr_frame(0),

@@ -899,15 +899,13 @@ mod tests {
 
     #[test]
     fn canonical_face_file_errors_name_the_line() {
-        let dir = std::env::temp_dir().join(format!("hrc-canon-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let p = dir.join("c.csv");
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.csv");
         std::fs::write(&p, "index,x,y,z\n0,1,2,3\n1,1,x,3\n").unwrap();
         let e = load_canonical_face(&p).unwrap_err().to_string();
         assert!(e.contains(":3:3"), "{e}");
         std::fs::write(&p, "index,x,y,z\n0,1,2,3\n").unwrap();
         let e = load_canonical_face(&p).unwrap_err().to_string();
         assert!(e.contains("468"), "{e}");
-        std::fs::remove_dir_all(&dir).ok();
     }
 }
