@@ -243,10 +243,7 @@ impl Workspace {
     /// Loads a calibration TOML file (format in the module docs).
     pub fn from_toml_file(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| AssessError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::error::read_text(path)?;
         Self::from_toml_str_at(&text, path)
     }
 
@@ -256,10 +253,7 @@ impl Workspace {
     }
 
     fn from_toml_str_at(text: &str, origin: &Path) -> Result<Self> {
-        let raw: RawWorkspace = toml::from_str(text).map_err(|e| AssessError::Parse {
-            origin: origin.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        let raw: RawWorkspace = crate::error::parse_toml(text, origin)?;
         raw.validate()
     }
 

@@ -323,10 +323,7 @@ impl AssessConfig {
     /// Loads and validates a TOML file.
     pub fn from_toml_file(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| AssessError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::error::read_text(path)?;
         Self::parse(&text, path)
     }
 
@@ -336,10 +333,7 @@ impl AssessConfig {
     }
 
     fn parse(text: &str, origin: &Path) -> Result<Self> {
-        let cfg: Self = toml::from_str(text).map_err(|e| AssessError::Parse {
-            origin: origin.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        let cfg: Self = crate::error::parse_toml(text, origin)?;
         cfg.validate()?;
         Ok(cfg)
     }

@@ -88,6 +88,26 @@ pub enum AssessError {
 /// Result alias of this crate.
 pub type Result<T, E = AssessError> = std::result::Result<T, E>;
 
+/// Reads a whole text file; a failure is [`AssessError::Io`] naming the file.
+pub(crate) fn read_text(path: &std::path::Path) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|source| AssessError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Parses a TOML document; a failure is [`AssessError::Parse`] naming `origin` (the file, or
+/// `<string>`), with the parser's line, column and key.
+pub(crate) fn parse_toml<T: serde::de::DeserializeOwned>(
+    text: &str,
+    origin: &std::path::Path,
+) -> Result<T> {
+    toml::from_str(text).map_err(|e| AssessError::Parse {
+        origin: origin.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
 impl AssessError {
     pub(crate) fn invalid(key: impl Into<String>, rule: impl Into<String>) -> Self {
         Self::InvalidValue {

@@ -387,10 +387,7 @@ fn detect_events(
 /// Reads a CSV with the expected header. Empty or non-finite cells make the row `None`;
 /// a wrong field count or an unparsable cell is an error with the line and column.
 fn read_table(path: &Path, header: &[&str]) -> Result<Table> {
-    let text = std::fs::read_to_string(path).map_err(|source| AssessError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text = crate::error::read_text(path)?;
     let err = |line: usize, column: usize, message: String| AssessError::Csv {
         path: PathBuf::from(path),
         line: line as u64,

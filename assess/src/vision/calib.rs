@@ -282,10 +282,7 @@ impl BoardSpec {
     /// Loads a board TOML file (format: `config/board.toml`). Errors name the file and key.
     pub fn from_toml_file(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| AssessError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::error::read_text(path)?;
         Self::parse(&text, path).map_err(|e| in_file(e, path))
     }
 
@@ -295,10 +292,7 @@ impl BoardSpec {
     }
 
     fn parse(text: &str, origin: &Path) -> Result<Self> {
-        let raw: RawBoard = toml::from_str(text).map_err(|e| AssessError::Parse {
-            origin: origin.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        let raw: RawBoard = crate::error::parse_toml(text, origin)?;
         let dictionary = ArucoDictionary::from_name(&raw.dictionary).ok_or_else(|| {
             AssessError::invalid(
                 "dictionary",
@@ -1083,18 +1077,12 @@ impl ExtrinsicsFile {
     /// Loads an extrinsics file. Errors name the file and the key.
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| AssessError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::error::read_text(path)?;
         Self::parse(&text, path).map_err(|e| in_file(e, path))
     }
 
     fn parse(text: &str, origin: &Path) -> Result<Self> {
-        let raw: RawExtrinsicsFile = toml::from_str(text).map_err(|e| AssessError::Parse {
-            origin: origin.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        let raw: RawExtrinsicsFile = crate::error::parse_toml(text, origin)?;
         let [x, y, z, w] = raw.extrinsics.rotation_xyzw;
         if ![x, y, z, w].iter().all(|v| v.is_finite()) {
             return Err(AssessError::invalid(

@@ -111,10 +111,7 @@ pub struct PerceivedCues {
 
 /// The 468 points of MediaPipe's canonical face model [m].
 pub fn load_canonical_face(path: &Path) -> Result<Vec<Point3<f64>>> {
-    let text = std::fs::read_to_string(path).map_err(|source| AssessError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text = crate::error::read_text(path)?;
     let mut points = Vec::with_capacity(468);
     for (n, line) in text.lines().enumerate() {
         let line = line.trim();

@@ -139,14 +139,8 @@ impl DepthSequence {
     pub fn open(dir: impl AsRef<Path>) -> Result<Self> {
         let dir = dir.as_ref().to_path_buf();
         let toml_path = dir.join(DEPTH_TOML);
-        let text = std::fs::read_to_string(&toml_path).map_err(|source| AssessError::Io {
-            path: toml_path.clone(),
-            source,
-        })?;
-        let raw: RawDepthToml = toml::from_str(&text).map_err(|e| AssessError::Parse {
-            origin: toml_path.clone(),
-            message: e.to_string(),
-        })?;
+        let text = crate::error::read_text(&toml_path)?;
+        let raw: RawDepthToml = crate::error::parse_toml(&text, &toml_path)?;
         let in_file = |key: &str, rule: String| {
             AssessError::invalid(key, format!("{rule} (in {})", toml_path.display()))
         };
