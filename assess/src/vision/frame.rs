@@ -30,9 +30,9 @@ impl RgbImage {
     /// Reads an image file (any format OpenCV decodes: PNG, JPEG, ...) as RGB. A missing,
     /// empty, truncated or undecodable file is an [`AssessError::Source`] naming it.
     pub fn read(path: &std::path::Path) -> crate::Result<Self> {
-        use opencv::core::{Mat, Vec3b};
+        use opencv::core::Mat;
+        use opencv::imgcodecs;
         use opencv::prelude::*;
-        use opencv::{imgcodecs, imgproc};
         let err = |message: String| crate::AssessError::Source {
             source_name: path.display().to_string(),
             message,
@@ -43,21 +43,7 @@ impl RgbImage {
         if bgr.empty() {
             return Err(err("not a decodable image (empty or truncated?)".into()));
         }
-        let mut rgb = Mat::default();
-        imgproc::cvt_color_def(&bgr, &mut rgb, imgproc::COLOR_BGR2RGB)
-            .map_err(|e| err(e.message))?;
-        let (w, h) = (rgb.cols(), rgb.rows());
-        let data: Vec<u8> = rgb
-            .data_typed::<Vec3b>()
-            .map_err(|e| err(e.message))?
-            .iter()
-            .flat_map(|p| p.0)
-            .collect();
-        Ok(Self {
-            width: u32::try_from(w).map_err(|e| err(e.to_string()))?,
-            height: u32::try_from(h).map_err(|e| err(e.to_string()))?,
-            data,
-        })
+        super::source::capture::rgb_from_decoded(&bgr, &path.display().to_string())
     }
 
     /// Whether the buffer holds exactly `width * height * 3` bytes and the image is not empty.

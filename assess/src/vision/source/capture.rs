@@ -81,6 +81,35 @@ pub(crate) fn rgb_from_decoded(mat: &Mat, source_name: &str) -> Result<RgbImage>
     rgb_from_mat(mat, code, "colour conversion").map_err(|e| source_err(source_name, e.to_string()))
 }
 
+/// The intrinsics of a frame of `width` × `height` [px]: those fixed by the first frame
+/// (`slot`), which every later frame must match in size, else resolved now
+/// ([`resolve_intrinsics`]) and fixed. `frame_name` names the frame in the size error.
+pub(crate) fn frame_intrinsics(
+    slot: &mut Option<Intrinsics>,
+    source_name: &str,
+    frame_name: &str,
+    explicit: Option<Intrinsics>,
+    depth: Option<&DepthSequence>,
+    hfov_deg: f64,
+    (width, height): (u32, u32),
+) -> Result<Intrinsics> {
+    match *slot {
+        Some(k) if (k.width, k.height) == (width, height) => Ok(k),
+        Some(k) => Err(source_err(
+            frame_name,
+            format!(
+                "{width} x {height} px, earlier frames {} x {} px",
+                k.width, k.height
+            ),
+        )),
+        None => {
+            let k = resolve_intrinsics(source_name, explicit, depth, hfov_deg, width, height)?;
+            *slot = Some(k);
+            Ok(k)
+        }
+    }
+}
+
 /// The colour intrinsics for a `width` × `height` [px] stream (precedence in the module docs).
 pub(crate) fn resolve_intrinsics(
     source_name: &str,
@@ -438,30 +467,15 @@ impl FrameSource for VideoFileSource {
         let pos = self.cap.get(videoio::CAP_PROP_POS_MSEC).ok();
         let t = self.clock.next(pos);
         let color = rgb_from_decoded(&mat, &format!("{} frame {}", self.name, self.index))?;
-        let intrinsics = match self.intrinsics {
-            Some(k) if (k.width, k.height) == (color.width, color.height) => k,
-            Some(k) => {
-                return Err(source_err(
-                    &self.name,
-                    format!(
-                        "frame {} is {} x {} px, earlier frames {} x {} px",
-                        self.index, color.width, color.height, k.width, k.height
-                    ),
-                ));
-            }
-            None => {
-                let k = resolve_intrinsics(
-                    &self.name,
-                    self.options.intrinsics,
-                    self.depth.as_ref(),
-                    self.options.hfov_deg,
-                    color.width,
-                    color.height,
-                )?;
-                self.intrinsics = Some(k);
-                k
-            }
-        };
+        let intrinsics = frame_intrinsics(
+            &mut self.intrinsics,
+            &self.name,
+            &format!("{} frame {}", self.name, self.index),
+            self.options.intrinsics,
+            self.depth.as_ref(),
+            self.options.hfov_deg,
+            (color.width, color.height),
+        )?;
         let depth = match &self.depth {
             Some(seq) => Some(seq.read(&seq.frame_path(self.index), color.width, color.height)?),
             None => None,

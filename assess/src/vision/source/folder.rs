@@ -16,7 +16,7 @@ use opencv::prelude::*;
 
 use super::FrameSource;
 use super::capture::{
-    DEFAULT_FPS, DEFAULT_HFOV_DEG, DepthSequence, resolve_intrinsics, rgb_from_decoded,
+    DEFAULT_FPS, DEFAULT_HFOV_DEG, DepthSequence, frame_intrinsics, rgb_from_decoded,
 };
 use crate::vision::frame::{CameraFrame, Intrinsics};
 use crate::{AssessError, Result};
@@ -139,36 +139,16 @@ impl FrameSource for ImageFolderSource {
         let index = self.next as u64;
         // Advance first: a failing frame is reported once, and the caller may go on.
         self.next += 1;
-        let mat = imgcodecs::imread(&name, imgcodecs::IMREAD_COLOR)
-            .map_err(|e| source_err(&name, e.message))?;
-        if mat.empty() {
-            return Err(source_err(&name, "cannot read or decode the image"));
-        }
-        let color = rgb_from_decoded(&mat, &name)?;
-        let intrinsics = match self.intrinsics {
-            Some(k) if (k.width, k.height) == (color.width, color.height) => k,
-            Some(k) => {
-                return Err(source_err(
-                    &name,
-                    format!(
-                        "image is {} x {} px, earlier frames {} x {} px",
-                        color.width, color.height, k.width, k.height
-                    ),
-                ));
-            }
-            None => {
-                let k = resolve_intrinsics(
-                    &self.dir.display().to_string(),
-                    self.options.intrinsics,
-                    self.depth.as_ref(),
-                    self.options.hfov_deg,
-                    color.width,
-                    color.height,
-                )?;
-                self.intrinsics = Some(k);
-                k
-            }
-        };
+        let color = crate::vision::RgbImage::read(path)?;
+        let intrinsics = frame_intrinsics(
+            &mut self.intrinsics,
+            &self.dir.display().to_string(),
+            &name,
+            self.options.intrinsics,
+            self.depth.as_ref(),
+            self.options.hfov_deg,
+            (color.width, color.height),
+        )?;
         let depth = match &self.depth {
             Some(seq) => {
                 let stem = path
