@@ -1,16 +1,23 @@
 //! `hrc-adapt assess`: offline assessment of a recording.
 //!
-//! Reads a cue CSV (`assess::io::cue_csv`) or a KTH handover folder (`assess::io::kth`), runs the
-//! [`Assessor`] over every frame, and writes into `--out`:
+//! Reads a cue CSV (`assess::io::cue_csv`) or a KTH handover folder (`assess::io::kth`), or
+//! (feature `vision`) streams camera frames from a video file, an image folder, a RealSense
+//! `.bag` or a live camera through the landmark pipeline and the cue extractor
+//! (`crate::vision_cmd`). It runs the [`Assessor`] over every frame, and writes into `--out`:
 //! - `indicators.csv`, one row per frame (columns in [`report::table`]);
 //! - the indicator-dynamics plots, four panels and a combined figure ([`report::plot`]);
-//! - `assess_config.toml`, the model configuration in force (every key).
+//! - `assess_config.toml`, the model configuration in force (every key);
+//! - for camera inputs: `cues.csv` (the `assess::io::cue_csv` format, so the run can be
+//!   assessed again without the video) and `landmarks.csv` (`crate::vision_cmd::LandmarkCsv`).
+//!   **Privacy**: these hold landmarks and cues only; the camera image is written only to the
+//!   `--annotate` path, and only when it is given.
 //!
 //! Everything is written into a temporary folder next to `--out` and renamed into place at the
 //! end, so a failed run leaves no partial results. An existing non-empty `--out` is replaced only
 //! with `--force`.
 
 use crate::report;
+use crate::vision_cmd::{CameraArgs, CueInput};
 
 use std::fmt::Write as _;
 use std::fs;
@@ -30,11 +37,18 @@ use report::table::IndicatorTable;
 const TABLE_FILE: &str = "indicators.csv";
 /// The configuration in force, inside `--out`.
 const CONFIG_FILE: &str = "assess_config.toml";
+/// Camera inputs: the cues, in the cue CSV format, inside `--out`.
+const CUES_FILE: &str = "cues.csv";
+/// Camera inputs: the landmarks, inside `--out`.
+const LANDMARKS_FILE: &str = "landmarks.csv";
 
 /// Arguments of `hrc-adapt assess`.
 #[derive(Debug, Args)]
 pub(crate) struct AssessArgs {
-    /// Cue CSV file, or a KTH handover folder.
+    /// Cues: a cue CSV file, a KTH handover folder, a video file (.mp4 .avi .mkv .mov), an
+    /// image folder, a RealSense .bag (feature `realsense`), `camera` (a RealSense camera if
+    /// built with `realsense` and one is connected, else the first webcam) or `webcam:N`.
+    /// Camera inputs write landmarks.csv and cues.csv, never images, unless --annotate is given.
     #[arg(long)]
     cues: PathBuf,
     /// Workspace calibration TOML.
@@ -49,12 +63,60 @@ pub(crate) struct AssessArgs {
     /// Replace an existing non-empty output folder.
     #[arg(long)]
     force: bool,
+    /// Options for camera inputs (video, images, .bag, camera).
+    #[command(flatten)]
+    vision: VisionArgs,
+}
+
+/// `assess` options for camera inputs.
+#[derive(Debug, Clone, Default, Args)]
+#[command(next_help_heading = "Camera inputs (video, image folder, .bag, camera, webcam:N)")]
+pub(crate) struct VisionArgs {
+    /// Extrinsics, intrinsics, field of view, model variant.
+    #[command(flatten)]
+    camera: CameraArgs,
+    /// A folder of 16-bit PNG depth images aligned to the video or image folder (with a
+    /// depth.toml giving the scale; see assess::vision::source::capture).
+    #[arg(long, value_name = "FOLDER")]
+    depth: Option<PathBuf>,
+    /// Detect on every frame independently (for folders of unrelated photos) instead of
+    /// tracking from frame to frame.
+    #[arg(long = "static")]
+    still: bool,
+    /// Stop after this many frames (a live camera otherwise runs until Ctrl-C).
+    #[arg(long, value_name = "N")]
+    max_frames: Option<u64>,
+    /// ALSO WRITE THE CAMERA IMAGE: the monitoring view (landmarks, head ray, workspace areas
+    /// with the confirmed one highlighted, live indicators) as an .avi (PNG frames) or, for a
+    /// path without extension, a folder of PNGs. Without this flag no image is written
+    /// (privacy: only landmarks and cues are kept).
+    #[arg(long, value_name = "PATH")]
+    annotate: Option<PathBuf>,
+}
+
+impl VisionArgs {
+    /// The flags given that apply to camera inputs only.
+    fn given(&self) -> Vec<&'static str> {
+        let c = &self.camera;
+        [
+            (c.extrinsics.is_some(), "--extrinsics"),
+            (c.intrinsics.is_some(), "--intrinsics"),
+            (c.lite, "--lite"),
+            (self.depth.is_some(), "--depth"),
+            (self.still, "--static"),
+            (self.max_frames.is_some(), "--max-frames"),
+            (self.annotate.is_some(), "--annotate"),
+        ]
+        .into_iter()
+        .filter_map(|(given, name)| given.then_some(name))
+        .collect()
+    }
 }
 
 /// What a run produced, for the summary.
 #[derive(Debug)]
 struct Report {
-    cues: PathBuf,
+    cues: String,
     frames: usize,
     rejected: u64,
     duration_s: f64,
@@ -70,11 +132,149 @@ pub(crate) fn run(args: AssessArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The assessment of a stream of cue frames into a staging folder.
+struct Run {
+    names: Workspace,
+    assessor: Assessor,
+    staging: Staging,
+    table_path: PathBuf,
+    table: IndicatorTable<BufWriter<fs::File>>,
+    samples: Vec<Sample>,
+}
+
+impl std::fmt::Debug for Run {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Run")
+            .field("staging", &self.staging)
+            .field("samples", &self.samples.len())
+            .finish()
+    }
+}
+
+impl Run {
+    fn new(workspace: Workspace, cfg: AssessConfig, out: &Path) -> anyhow::Result<Self> {
+        // The assessor owns its workspace; the table needs the area names while `update`'s
+        // result is borrowed.
+        let names = workspace.clone();
+        let assessor =
+            Assessor::new(workspace, cfg).context("the model configuration is invalid")?;
+        let staging = Staging::new(out)?;
+        let table_path = staging.path().join(TABLE_FILE);
+        let file = fs::File::create(&table_path)
+            .with_context(|| format!("cannot create {}", table_path.display()))?;
+        let table = IndicatorTable::new(BufWriter::new(file))
+            .with_context(|| format!("cannot write {}", table_path.display()))?;
+        Ok(Self {
+            names,
+            assessor,
+            staging,
+            table_path,
+            table,
+            samples: Vec::new(),
+        })
+    }
+
+    /// Assesses one frame and writes its row; `None` when the assessor rejected the frame
+    /// (time not finite or not increasing).
+    fn push(&mut self, frame: &CueFrame) -> anyhow::Result<Option<&Assessment>> {
+        let a = self.assessor.update(frame);
+        if a.last_rejected {
+            return Ok(None);
+        }
+        self.table
+            .write(&self.names, a)
+            .with_context(|| format!("cannot write {}", self.table_path.display()))?;
+        self.samples.push(Sample::of(a));
+        Ok(Some(a))
+    }
+
+    /// Plots, the configuration, and the results moved into `out`. `extra` are further files
+    /// already written into the staging folder (names relative to it) or elsewhere (absolute).
+    fn finish(
+        self,
+        args: &AssessArgs,
+        cues: String,
+        progress: &Progress,
+        extra: Vec<PathBuf>,
+    ) -> anyhow::Result<Report> {
+        let Self {
+            assessor,
+            staging,
+            table_path,
+            table,
+            samples,
+            ..
+        } = self;
+        table
+            .finish()
+            .and_then(|mut w| w.flush())
+            .with_context(|| format!("cannot write {}", table_path.display()))?;
+        let last: &Assessment = assessor.assessment();
+        if samples.is_empty() {
+            if last.frames == 0 {
+                bail!("{cues} holds no frames");
+            }
+            bail!("every frame of {cues} was rejected (times not finite or not increasing)");
+        }
+
+        progress.set_message("plotting");
+        let cfg = assessor.config();
+        let figure = Figure {
+            samples: &samples,
+            medium_from: cfg.composite.medium_from,
+            high_from: cfg.composite.high_from,
+            horizon_s: cfg.window.horizon_s,
+        };
+        let plots = plot::render(staging.path(), &figure)?;
+        let config_path = staging.path().join(CONFIG_FILE);
+        fs::write(&config_path, cfg.to_toml_string()?)
+            .with_context(|| format!("cannot write {}", config_path.display()))?;
+
+        let mut files = vec![args.out.join(TABLE_FILE)];
+        files.extend(
+            plots
+                .iter()
+                .filter_map(|p| p.file_name())
+                .map(|n| args.out.join(n)),
+        );
+        files.push(args.out.join(CONFIG_FILE));
+        files.extend(extra.iter().map(|p| args.out.join(p)));
+        let report = Report {
+            cues,
+            frames: samples.len(),
+            rejected: last.rejected_frames,
+            duration_s: samples.last().map_or(0.0, |s| s.t) - samples.first().map_or(0.0, |s| s.t),
+            switches: last.switches,
+            cumulative: last.cumulative,
+            out: args.out.clone(),
+            files,
+        };
+        staging.install(&args.out, args.force)?;
+        Ok(report)
+    }
+}
+
 /// The whole command, without printing.
 fn assess(args: &AssessArgs) -> anyhow::Result<Report> {
     check_out(&args.out, args.force)?;
-    let mut inputs = vec![args.cues.as_path(), args.workspace.as_path()];
+    let input = CueInput::parse(&args.cues)?;
+    if !input.is_camera() {
+        let given = args.vision.given();
+        if !given.is_empty() {
+            bail!(
+                "{} appl{} to camera inputs only (video, image folder, .bag, camera), not to the \
+                 cue file {}",
+                given.join(", "),
+                if given.len() == 1 { "ies" } else { "y" },
+                args.cues.display()
+            );
+        }
+    }
+    let mut inputs: Vec<&Path> = vec![args.workspace.as_path()];
+    inputs.extend(input.path());
     inputs.extend(args.config.as_deref());
+    inputs.extend(args.vision.depth.as_deref());
+    inputs.extend(args.vision.camera.extrinsics.as_deref());
     refuse_inputs_inside(&args.out, &inputs)?;
 
     let workspace = Workspace::from_toml_file(&args.workspace).with_context(|| {
@@ -88,95 +288,160 @@ fn assess(args: &AssessArgs) -> anyhow::Result<Report> {
             .with_context(|| format!("cannot load the model configuration {}", path.display()))?,
         None => AssessConfig::default(),
     };
-    let frames = read_cues(&args.cues)?;
+    if input.is_camera() {
+        return assess_camera(args, &input, workspace, cfg);
+    }
+    let frames = read_cues(&input)?;
     if frames.is_empty() {
         bail!("{} holds no frames", args.cues.display());
     }
-    // The assessor owns its workspace; the table needs the area names while `update`'s result is borrowed.
-    let names = workspace.clone();
-    let mut assessor =
-        Assessor::new(workspace, cfg).context("the model configuration is invalid")?;
-
-    let staging = Staging::new(&args.out)?;
-    let table_path = staging.path().join(TABLE_FILE);
-    let file = fs::File::create(&table_path)
-        .with_context(|| format!("cannot create {}", table_path.display()))?;
-    let mut table = IndicatorTable::new(BufWriter::new(file))
-        .with_context(|| format!("cannot write {}", table_path.display()))?;
-
-    let progress = progress_bar(frames.len() as u64);
-    let mut samples = Vec::with_capacity(frames.len());
+    let mut run = Run::new(workspace, cfg, &args.out)?;
+    let progress = progress_bar(Some(frames.len() as u64));
     for frame in &frames {
-        let a = assessor.update(frame);
+        run.push(frame)?;
         progress.inc(1);
-        if a.last_rejected {
-            continue;
-        }
-        table
-            .write(&names, a)
-            .with_context(|| format!("cannot write {}", table_path.display()))?;
-        samples.push(Sample::of(a));
     }
-    table
-        .finish()
-        .and_then(|mut w| w.flush())
-        .with_context(|| format!("cannot write {}", table_path.display()))?;
-    let last: &Assessment = assessor.assessment();
-    if samples.is_empty() {
+    run.finish(args, args.cues.display().to_string(), &progress, Vec::new())
+}
+
+#[cfg(not(feature = "vision"))]
+fn assess_camera(
+    _args: &AssessArgs,
+    input: &CueInput,
+    _workspace: Workspace,
+    _cfg: AssessConfig,
+) -> anyhow::Result<Report> {
+    Err(crate::vision_cmd::vision_missing(input))
+}
+
+/// Camera inputs: frames → landmarks → cues → assessor, streamed.
+#[cfg(feature = "vision")]
+fn assess_camera(
+    args: &AssessArgs,
+    input: &CueInput,
+    workspace: Workspace,
+    cfg: AssessConfig,
+) -> anyhow::Result<Report> {
+    use crate::vision_cmd::{
+        ImageSink, LandmarkCsv, Perception, annotate, load_extrinsics, open_source, pipeline_config,
+    };
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+
+    let v = &args.vision;
+    if v.max_frames == Some(0) {
+        bail!("--max-frames must be at least 1");
+    }
+    if let Some(a) = &v.annotate {
+        refuse_annotate_onto_inputs(a, &args.out, input)?;
+    }
+    let mut opened = open_source(input, &v.camera, v.depth.as_deref())?;
+    let extrinsics = load_extrinsics(&v.camera)?;
+    let described = opened.source.describe();
+    let mut perception = Perception::load(
+        pipeline_config(&v.camera, v.still),
+        extrinsics,
+        v.camera.intrinsics,
+    )?;
+    let overlay_ws = workspace.clone();
+    let mut run = Run::new(workspace, cfg, &args.out)?;
+    let mut landmarks = LandmarkCsv::create(&run.staging.path().join(LANDMARKS_FILE))?;
+    // The annotated view goes into the staging folder when it is asked for inside `--out`.
+    let annotate_path = v
+        .annotate
+        .as_ref()
+        .map(|a| match a.strip_prefix(&args.out) {
+            Ok(rel) => (run.staging.path().join(rel), args.out.join(rel)),
+            Err(_) => (a.clone(), a.clone()),
+        });
+    let mut sink = match &annotate_path {
+        Some((write_to, _)) => Some(ImageSink::create(write_to, "--annotate")?),
+        None => None,
+    };
+
+    let stop = Arc::new(AtomicBool::new(false));
+    if input.is_live() {
+        crate::trial::install_ctrl_c(stop.clone());
+        eprintln!("reading {described}; Ctrl-C stops and writes the results");
+    }
+    let len = match (opened.len, v.max_frames) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    };
+    let progress = progress_bar(len);
+    let mut cues: Vec<CueFrame> = Vec::new();
+    let mut n: u64 = 0;
+    while v.max_frames.is_none_or(|m| n < m) && !stop.load(Ordering::Relaxed) {
+        let Some(frame) = opened
+            .source
+            .next_frame()
+            .with_context(|| format!("reading {described}"))?
+        else {
+            break;
+        };
+        let p = perception.step(&frame)?;
+        landmarks.write(frame.index, frame.t, &p.landmarks)?;
+        cues.push(p.cues.frame);
+        let a = run.push(&p.cues.frame)?;
+        if let Some(sink) = sink.as_mut() {
+            let img = annotate(&frame, &p, perception.extrinsics(), &overlay_ws, a)?;
+            sink.push(&img, frame.t)?;
+        }
+        n += 1;
+        progress.inc(1);
+    }
+    landmarks.finish()?;
+    let cues_path = run.staging.path().join(CUES_FILE);
+    assess::io::cue_csv::write(&cues_path, &cues)
+        .with_context(|| format!("cannot write {}", cues_path.display()))?;
+    if let Some(sink) = sink {
+        sink.finish()?;
+    }
+    let mut extra = vec![PathBuf::from(CUES_FILE), PathBuf::from(LANDMARKS_FILE)];
+    extra.extend(annotate_path.map(|(_, shown)| shown));
+    let result = run.finish(args, described, &progress, extra);
+    if result.is_err()
+        && let Some(a) = &v.annotate
+        && !a.starts_with(&args.out)
+    {
+        // Nothing is half-written: the annotated view goes with the failed run.
+        let _ = fs::remove_file(a).or_else(|_| fs::remove_dir_all(a));
+    }
+    result
+}
+
+/// `--annotate` must not be `--out` itself nor overwrite an input.
+#[cfg(feature = "vision")]
+fn refuse_annotate_onto_inputs(
+    annotate: &Path,
+    out: &Path,
+    input: &CueInput,
+) -> anyhow::Result<()> {
+    if annotate == out {
+        bail!("--annotate must not be the --out folder itself; give a path inside or beside it");
+    }
+    if let Some(p) = input.path()
+        && fs::canonicalize(p).ok() == fs::canonicalize(annotate).ok()
+        && annotate.exists()
+    {
         bail!(
-            "every frame of {} was rejected (times not finite or not increasing)",
-            args.cues.display()
+            "--annotate {} is the input; choose another path",
+            annotate.display()
         );
     }
-
-    progress.set_message("plotting");
-    let cfg = assessor.config();
-    let figure = Figure {
-        samples: &samples,
-        medium_from: cfg.composite.medium_from,
-        high_from: cfg.composite.high_from,
-        horizon_s: cfg.window.horizon_s,
-    };
-    let plots = plot::render(staging.path(), &figure)?;
-    let config_path = staging.path().join(CONFIG_FILE);
-    fs::write(&config_path, cfg.to_toml_string()?)
-        .with_context(|| format!("cannot write {}", config_path.display()))?;
-
-    let mut files = vec![args.out.join(TABLE_FILE)];
-    files.extend(
-        plots
-            .iter()
-            .filter_map(|p| p.file_name())
-            .map(|n| args.out.join(n)),
-    );
-    files.push(args.out.join(CONFIG_FILE));
-    let report = Report {
-        cues: args.cues.clone(),
-        frames: samples.len(),
-        rejected: last.rejected_frames,
-        duration_s: samples.last().map_or(0.0, |s| s.t) - samples.first().map_or(0.0, |s| s.t),
-        switches: last.switches,
-        cumulative: last.cumulative,
-        out: args.out.clone(),
-        files,
-    };
-    drop(progress);
-    staging.install(&args.out, args.force)?;
-    Ok(report)
+    Ok(())
 }
 
 /// A cue CSV file, or a KTH handover folder.
-fn read_cues(path: &Path) -> anyhow::Result<Vec<CueFrame>> {
-    let meta =
-        fs::metadata(path).with_context(|| format!("cannot read the cues {}", path.display()))?;
-    if meta.is_dir() {
-        Ok(assess::io::kth::read_taker(
+fn read_cues(input: &CueInput) -> anyhow::Result<Vec<CueFrame>> {
+    match input {
+        CueInput::Kth(path) => Ok(assess::io::kth::read_taker(
             path,
             &assess::io::kth::KthOptions::default(),
-        )?)
-    } else {
+        )?),
         // The error already names the file, line and column.
-        Ok(assess::io::cue_csv::read(path)?)
+        CueInput::CueCsv(path) => Ok(assess::io::cue_csv::read(path)?),
+        other => bail!("internal: {other:?} is not a cue file"),
     }
 }
 
@@ -197,15 +462,23 @@ impl Drop for Progress {
     }
 }
 
-/// A progress bar on stderr, hidden when stderr is not a terminal.
-fn progress_bar(len: u64) -> Progress {
+/// A progress bar on stderr, hidden when stderr is not a terminal: `len` frames, or a
+/// counter with the frame rate when the length is unknown (live cameras).
+fn progress_bar(len: Option<u64>) -> Progress {
     if !std::io::stderr().is_terminal() {
         return Progress(ProgressBar::hidden());
     }
-    let bar = ProgressBar::new(len);
-    if let Ok(style) =
-        ProgressStyle::with_template("{msg:>10} [{bar:40}] {pos}/{len} frames ({eta})")
-    {
+    let (bar, template) = match len {
+        Some(n) => (
+            ProgressBar::new(n),
+            "{msg:>10} [{bar:40}] {pos}/{len} frames, {per_sec} ({eta})",
+        ),
+        None => (
+            ProgressBar::no_length(),
+            "{msg:>10} {spinner} {pos} frames, {per_sec}",
+        ),
+    };
+    if let Ok(style) = ProgressStyle::with_template(template) {
         bar.set_style(style.progress_chars("=> "));
     }
     bar.set_message("assessing");
@@ -353,12 +626,7 @@ impl Report {
         } else {
             String::new()
         };
-        let _ = writeln!(
-            s,
-            "assessed {} frames from {}",
-            self.frames,
-            self.cues.display()
-        );
+        let _ = writeln!(s, "assessed {} frames from {}", self.frames, self.cues);
         if self.rejected > 0 {
             let _ = writeln!(
                 s,
@@ -482,6 +750,7 @@ mod tests {
             config: None,
             out: dir.path().join("results"),
             force: false,
+            vision: VisionArgs::default(),
         };
         Setup { dir, args }
     }
@@ -580,6 +849,7 @@ mod tests {
             config: a.config.clone(),
             out: a.out.clone(),
             force: a.force,
+            vision: a.vision.clone(),
         }
     }
 
@@ -695,6 +965,7 @@ mod tests {
             config: None,
             out: dir.path().join("kth"),
             force: false,
+            vision: VisionArgs::default(),
         };
         let report = assess(&args).unwrap();
         // 801 rows at 120 Hz.
@@ -702,5 +973,368 @@ mod tests {
         assert!((report.duration_s - 800.0 / 120.0).abs() < 1e-9);
         let text = fs::read_to_string(args.out.join(TABLE_FILE)).unwrap();
         assert_eq!(text.lines().count(), 802);
+    }
+}
+
+/// `assess` on camera inputs (needs the models under `models/` and ONNX Runtime from
+/// `scripts/setup`). The frames are copies of the bundled photo `data/images/pose_sitting.jpg`
+/// (960 × 640 px, one seated person with face and both hands in view).
+#[cfg(all(test, feature = "vision"))]
+mod vision_tests {
+    use super::*;
+    use crate::vision_cmd::{ImageSink, LANDMARK_HEADER};
+    use assess::vision::FrameSource as _;
+    use assess::vision::RgbImage;
+    use assess::vision::source::capture::{VideoFileOptions, VideoFileSource};
+
+    const PHOTO: &str = "data/images/pose_sitting.jpg";
+
+    fn root() -> PathBuf {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    }
+
+    /// A temporary folder with `images/` (three copies of the photo) and the example
+    /// workspace.
+    struct Setup {
+        dir: tempfile::TempDir,
+        images: PathBuf,
+        workspace: PathBuf,
+    }
+
+    fn setup() -> Setup {
+        let dir = tempfile::tempdir().unwrap();
+        let images = dir.path().join("images");
+        fs::create_dir(&images).unwrap();
+        for i in 0..3 {
+            fs::copy(root().join(PHOTO), images.join(format!("{i:06}.jpg"))).unwrap();
+        }
+        Setup {
+            images,
+            workspace: root().join("config/example-workspace.toml"),
+            dir,
+        }
+    }
+
+    fn args(cues: &Path, workspace: &Path, out: &Path, vision: VisionArgs) -> AssessArgs {
+        AssessArgs {
+            cues: cues.to_path_buf(),
+            workspace: workspace.to_path_buf(),
+            config: None,
+            out: out.to_path_buf(),
+            force: false,
+            vision,
+        }
+    }
+
+    fn still() -> VisionArgs {
+        VisionArgs {
+            still: true,
+            ..VisionArgs::default()
+        }
+    }
+
+    /// Every file under `dir`, recursively, relative to it.
+    fn files(dir: &Path) -> Vec<String> {
+        let mut out = Vec::new();
+        let mut stack = vec![dir.to_path_buf()];
+        while let Some(d) = stack.pop() {
+            for e in fs::read_dir(&d).unwrap() {
+                let p = e.unwrap().path();
+                if p.is_dir() {
+                    stack.push(p);
+                } else {
+                    out.push(p.strip_prefix(dir).unwrap().display().to_string());
+                }
+            }
+        }
+        out.sort();
+        out
+    }
+
+    /// Landmark rows per (frame, set).
+    fn landmark_counts(path: &Path) -> std::collections::BTreeMap<(u64, String), usize> {
+        let text = fs::read_to_string(path).unwrap();
+        let mut lines = text.lines();
+        assert_eq!(lines.next(), Some(LANDMARK_HEADER));
+        let mut counts = std::collections::BTreeMap::new();
+        for line in lines {
+            let cells: Vec<&str> = line.split(',').collect();
+            assert_eq!(cells.len(), 7, "{line}");
+            let x: f64 = cells[4].parse().unwrap();
+            let y: f64 = cells[5].parse().unwrap();
+            let score: f64 = cells[6].parse().unwrap();
+            assert!(
+                x.is_finite() && y.is_finite() && (0.0..=1.0).contains(&score),
+                "{line}"
+            );
+            *counts
+                .entry((cells[0].parse().unwrap(), cells[2].to_string()))
+                .or_insert(0) += 1;
+        }
+        counts
+    }
+
+    #[test]
+    fn an_image_folder_gives_indicators_cues_and_landmarks_and_no_image() {
+        let s = setup();
+        let out = s.dir.path().join("results");
+        let report = assess(&args(&s.images, &s.workspace, &out, still())).unwrap();
+        assert_eq!(report.frames, 3);
+
+        // Exactly the CSV path's files plus cues.csv and landmarks.csv: no camera image
+        // (the only PNGs are the plots).
+        let mut want = vec![
+            TABLE_FILE.to_string(),
+            CONFIG_FILE.to_string(),
+            CUES_FILE.to_string(),
+            LANDMARKS_FILE.to_string(),
+        ];
+        want.extend(plot::FILES.iter().map(|f| f.to_string()));
+        want.sort();
+        assert_eq!(files(&out), want);
+        assert_eq!(
+            files(s.dir.path())
+                .iter()
+                .filter(|f| f.starts_with("results"))
+                .count(),
+            want.len()
+        );
+
+        // cues.csv reads back with the cue CSV reader: three frames with head, body and both
+        // hands, at the folder's nominal 30 fps; the positions are in the camera frame
+        // (identity extrinsics): the person is in front of the camera (z > 0).
+        let cues = assess::io::cue_csv::read(&out.join(CUES_FILE)).unwrap();
+        assert_eq!(cues.len(), 3);
+        for (k, f) in cues.iter().enumerate() {
+            assert!((f.t - k as f64 / 30.0).abs() < 1e-9);
+            let head = f.head.expect("head cue");
+            assert!(head.position.z > 0.3 && head.position.z < 5.0, "{head:?}");
+            assert!(
+                f.body.is_some() && f.hands.iter().all(Option::is_some),
+                "{f:?}"
+            );
+        }
+        // The same cues assessed again from cues.csv give the same table.
+        let again = s.dir.path().join("again");
+        assess(&args(
+            &out.join(CUES_FILE),
+            &s.workspace,
+            &again,
+            VisionArgs::default(),
+        ))
+        .unwrap();
+        assert_eq!(
+            fs::read(again.join(TABLE_FILE)).unwrap(),
+            fs::read(out.join(TABLE_FILE)).unwrap()
+        );
+
+        // landmarks.csv: pose 33, face 468 and two hands of 21 on each frame.
+        let counts = landmark_counts(&out.join(LANDMARKS_FILE));
+        for frame in 0..3 {
+            for (set, n) in [("pose", 33), ("face", 468), ("hand0", 21), ("hand1", 21)] {
+                assert_eq!(
+                    counts.get(&(frame, set.to_string())),
+                    Some(&n),
+                    "{frame} {set}"
+                );
+            }
+        }
+        assert_eq!(counts.len(), 12);
+    }
+
+    #[test]
+    fn annotate_writes_a_png_folder_inside_out_or_an_avi_beside_it() {
+        let s = setup();
+        // A folder of PNGs inside --out: staged with the results.
+        let out = s.dir.path().join("results");
+        let v = VisionArgs {
+            annotate: Some(out.join("view")),
+            ..still()
+        };
+        let report = assess(&args(&s.images, &s.workspace, &out, v)).unwrap();
+        assert!(report.files.contains(&out.join("view")));
+        let pngs = files(&out.join("view"));
+        assert_eq!(pngs, ["000000.png", "000001.png", "000002.png"]);
+        let first = RgbImage::read(&out.join("view/000000.png")).unwrap();
+        let photo = RgbImage::read(&root().join(PHOTO)).unwrap();
+        assert_eq!((first.width, first.height), (photo.width, photo.height));
+        // The overlay changed the image (landmarks, text).
+        assert_ne!(first.data, photo.data);
+
+        // An .avi beside it: it plays back through OpenCV with three frames of the photo's size.
+        let avi = s.dir.path().join("view.avi");
+        let v = VisionArgs {
+            annotate: Some(avi.clone()),
+            ..still()
+        };
+        assess(&args(&s.images, &s.workspace, &s.dir.path().join("r2"), v)).unwrap();
+        let mut video = VideoFileSource::open(&avi, VideoFileOptions::default()).unwrap();
+        let mut n = 0;
+        while let Some(f) = video.next_frame().unwrap() {
+            assert_eq!((f.color.width, f.color.height), (photo.width, photo.height));
+            n += 1;
+        }
+        assert_eq!(n, 3);
+    }
+
+    #[test]
+    fn a_generated_avi_is_assessed_with_tracking_and_max_frames() {
+        let s = setup();
+        // A 5-frame video of the photo, written with the same AVI writer as --annotate.
+        let avi = s.dir.path().join("clip.avi");
+        let photo = RgbImage::read(&root().join(PHOTO)).unwrap();
+        let mut sink = ImageSink::create(&avi, "test").unwrap();
+        for k in 0..5 {
+            sink.push(&photo, f64::from(k) / 30.0).unwrap();
+        }
+        sink.finish().unwrap();
+        let out = s.dir.path().join("results");
+        let v = VisionArgs {
+            max_frames: Some(4),
+            ..VisionArgs::default()
+        };
+        let report = assess(&args(&avi, &s.workspace, &out, v)).unwrap();
+        assert_eq!(report.frames, 4);
+        let cues = assess::io::cue_csv::read(&out.join(CUES_FILE)).unwrap();
+        assert_eq!(cues.len(), 4);
+        assert!(cues.iter().all(|f| f.head.is_some()));
+        let counts = landmark_counts(&out.join(LANDMARKS_FILE));
+        assert_eq!(counts.get(&(3, "pose".to_string())), Some(&33));
+        assert!(!files(&out).iter().any(|f| f.ends_with(".avi")));
+    }
+
+    #[test]
+    fn bad_camera_inputs_are_clear_errors_and_write_nothing() {
+        let s = setup();
+        let out = s.dir.path().join("results");
+        let err = |cues: &Path, v: VisionArgs| {
+            format!(
+                "{:#}",
+                assess(&args(cues, &s.workspace, &out, v)).unwrap_err()
+            )
+        };
+        // Not a video, despite its name.
+        let fake = s.dir.path().join("fake.mp4");
+        fs::write(&fake, b"not a video").unwrap();
+        let e = err(&fake, VisionArgs::default());
+        assert!(e.contains(&fake.display().to_string()), "{e}");
+        // An unsupported file.
+        let txt = s.dir.path().join("notes.txt");
+        fs::write(&txt, b"x").unwrap();
+        assert!(err(&txt, VisionArgs::default()).contains("unsupported input"));
+        // Camera options with a cue file.
+        let csv = s.dir.path().join("c.csv");
+        assess::io::cue_csv::write(&csv, &[CueFrame::empty(0.0)]).unwrap();
+        let e = err(
+            &csv,
+            VisionArgs {
+                annotate: Some(s.dir.path().join("a.avi")),
+                ..still()
+            },
+        );
+        assert!(
+            e.starts_with("--static, --annotate apply to camera inputs only"),
+            "{e}"
+        );
+        // --depth with a camera keyword, --max-frames 0, a bad --annotate extension.
+        let e = err(
+            &s.images,
+            VisionArgs {
+                max_frames: Some(0),
+                ..still()
+            },
+        );
+        assert_eq!(e, "--max-frames must be at least 1");
+        let e = err(
+            &s.images,
+            VisionArgs {
+                annotate: Some(s.dir.path().join("a.mp4")),
+                ..still()
+            },
+        );
+        assert!(e.contains("expected an .avi file"), "{e}");
+        // A missing extrinsics file is named.
+        let v = VisionArgs {
+            camera: crate::vision_cmd::CameraArgs {
+                extrinsics: Some(s.dir.path().join("missing.toml")),
+                ..Default::default()
+            },
+            ..still()
+        };
+        let e = err(&s.images, v);
+        assert!(
+            e.contains("cannot load the extrinsics") && e.contains("missing.toml"),
+            "{e}"
+        );
+        assert!(!out.exists());
+        assert!(!s.dir.path().join("a.mp4").exists());
+    }
+
+    #[cfg(not(feature = "realsense"))]
+    #[test]
+    fn a_bag_without_the_realsense_feature_names_the_feature() {
+        let s = setup();
+        let bag = s.dir.path().join("foo.bag");
+        fs::write(&bag, b"x").unwrap();
+        let out = s.dir.path().join("results");
+        let e = format!(
+            "{:#}",
+            assess(&args(&bag, &s.workspace, &out, VisionArgs::default())).unwrap_err()
+        );
+        assert!(
+            e.contains("RealSense .bag files need the `realsense` feature"),
+            "{e}"
+        );
+        assert!(!out.exists());
+    }
+
+    #[test]
+    fn help_says_images_are_written_only_with_annotate() {
+        use clap::CommandFactory as _;
+        #[derive(Debug, clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            args: AssessArgs,
+        }
+        let help = Cli::command().render_long_help().to_string();
+        assert!(
+            help.contains("never images, unless --annotate is given"),
+            "{help}"
+        );
+        assert!(
+            help.contains("Without this flag no image is written"),
+            "{help}"
+        );
+        let parsed = <Cli as clap::Parser>::try_parse_from([
+            "assess",
+            "--cues",
+            "camera",
+            "--workspace",
+            "w.toml",
+            "--out",
+            "o",
+            "--lite",
+            "--intrinsics",
+            "600,600,320,240",
+            "--max-frames",
+            "10",
+        ])
+        .unwrap();
+        assert!(parsed.args.vision.camera.lite);
+        assert_eq!(parsed.args.vision.max_frames, Some(10));
+        let e = <Cli as clap::Parser>::try_parse_from([
+            "assess",
+            "--cues",
+            "camera",
+            "--workspace",
+            "w",
+            "--out",
+            "o",
+            "--intrinsics",
+            "1,2",
+        ])
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("expected fx,fy,cx,cy"), "{e}");
     }
 }

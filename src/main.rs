@@ -9,6 +9,7 @@ mod report;
 mod robot_cmd;
 mod stats;
 mod trial;
+mod vision_cmd;
 
 use clap::{Parser, Subcommand};
 

@@ -1,0 +1,977 @@
+//! Binary-side camera plumbing shared by `hrc-adapt assess --cues <video | images | .bag |
+//! camera | webcam:N>` and `hrc-adapt trial --cues camera`: what a `--cues` argument names, the
+//! camera options, and (feature `vision`) opening the frame source, the perception stack
+//! (landmarks → cues), the privacy-preserving outputs (`landmarks.csv`) and the opt-in image
+//! outputs (annotated monitoring view, stored video).
+//!
+//! **Privacy.** By default nothing derived from the camera image except landmarks and cues is
+//! written. Images are written only where the user asked for them by a flag
+//! (`assess --annotate`, `trial --store-video`).
+
+use std::ffi::OsStr;
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, bail};
+use clap::Args;
+
+/// Video file extensions taken by `--cues` (compared case-insensitively).
+pub(crate) const VIDEO_EXTENSIONS: [&str; 4] = ["mp4", "avi", "mkv", "mov"];
+/// Image file extensions that make a folder an image folder (compared case-insensitively).
+const IMAGE_EXTENSIONS: [&str; 7] = ["png", "jpg", "jpeg", "bmp", "tif", "tiff", "webp"];
+
+/// What a `--cues` argument names.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) enum CueInput {
+    /// A cue CSV (`assess::io::cue_csv`).
+    CueCsv(PathBuf),
+    /// A folder in the KTH handover layout.
+    Kth(PathBuf),
+    /// A video file (`.mp4 .avi .mkv .mov`).
+    Video(PathBuf),
+    /// A folder of images (frames in file-name order).
+    Images(PathBuf),
+    /// A RealSense `.bag` recording (feature `realsense`).
+    Bag(PathBuf),
+    /// `camera`: a RealSense camera if one is found (feature `realsense`), else webcam 0.
+    Camera,
+    /// `webcam:N`: the N-th webcam (`/dev/videoN`).
+    Webcam(u32),
+}
+
+impl CueInput {
+    /// Classifies a `--cues` argument. `camera` and `webcam:N` are keywords; a path is
+    /// classified by its extension (files) or contents (folders: images, else KTH).
+    pub(crate) fn parse(arg: &Path) -> anyhow::Result<Self> {
+        if let Some(s) = arg.to_str() {
+            if s == "camera" {
+                return Ok(Self::Camera);
+            }
+            if let Some(n) = s.strip_prefix("webcam:") {
+                let n = n.parse::<u32>().map_err(|_| {
+                    anyhow::anyhow!(
+                        "--cues {s}: expected webcam:N with N a device number (webcam:0)"
+                    )
+                })?;
+                return Ok(Self::Webcam(n));
+            }
+        }
+        let meta =
+            fs::metadata(arg).with_context(|| format!("cannot read the cues {}", arg.display()))?;
+        if meta.is_dir() {
+            return Ok(if folder_has_images(arg)? {
+                Self::Images(arg.to_path_buf())
+            } else {
+                Self::Kth(arg.to_path_buf())
+            });
+        }
+        let ext = arg
+            .extension()
+            .and_then(OsStr::to_str)
+            .map(str::to_ascii_lowercase)
+            .unwrap_or_default();
+        Ok(match ext.as_str() {
+            "csv" => Self::CueCsv(arg.to_path_buf()),
+            "bag" => Self::Bag(arg.to_path_buf()),
+            e if VIDEO_EXTENSIONS.contains(&e) => Self::Video(arg.to_path_buf()),
+            _ => bail!(
+                "--cues {}: unsupported input; expected a cue CSV (.csv), a KTH handover folder, \
+                 a video (.mp4 .avi .mkv .mov), an image folder, a RealSense .bag, `camera` or \
+                 `webcam:N`",
+                arg.display()
+            ),
+        })
+    }
+
+    /// Whether the cues come from camera frames (landmark inference) rather than a cue file.
+    pub(crate) fn is_camera(&self) -> bool {
+        !matches!(self, Self::CueCsv(_) | Self::Kth(_))
+    }
+
+    /// Whether the source is live (never ends by itself).
+    pub(crate) fn is_live(&self) -> bool {
+        matches!(self, Self::Camera | Self::Webcam(_))
+    }
+
+    /// The input's file or folder, if it has one.
+    pub(crate) fn path(&self) -> Option<&Path> {
+        match self {
+            Self::CueCsv(p) | Self::Kth(p) | Self::Video(p) | Self::Images(p) | Self::Bag(p) => {
+                Some(p)
+            }
+            Self::Camera | Self::Webcam(_) => None,
+        }
+    }
+}
+
+/// Whether a folder holds at least one image file (subfolders are not looked into).
+fn folder_has_images(dir: &Path) -> anyhow::Result<bool> {
+    for entry in fs::read_dir(dir).with_context(|| format!("cannot list {}", dir.display()))? {
+        let path = entry
+            .with_context(|| format!("cannot list {}", dir.display()))?
+            .path();
+        let is_image = path
+            .extension()
+            .and_then(OsStr::to_str)
+            .is_some_and(|e| IMAGE_EXTENSIONS.iter().any(|x| x.eq_ignore_ascii_case(e)));
+        if is_image && path.is_file() {
+            return Ok(true);
+        }
+    }
+    Ok(false)
+}
+
+/// Pinhole intrinsics given on the command line as `fx,fy,cx,cy` [px].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct IntrinsicsArg {
+    /// Focal length along x [px].
+    pub(crate) fx: f64,
+    /// Focal length along y [px].
+    pub(crate) fy: f64,
+    /// Principal point x [px].
+    pub(crate) cx: f64,
+    /// Principal point y [px].
+    pub(crate) cy: f64,
+}
+
+/// Parses `fx,fy,cx,cy` [px]: four finite numbers, focal lengths > 0.
+pub(crate) fn parse_intrinsics(s: &str) -> Result<IntrinsicsArg, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("expected fx,fy,cx,cy in pixels (four numbers), got `{s}`"))?;
+    let [fx, fy, cx, cy] = v[..] else {
+        return Err(format!(
+            "expected fx,fy,cx,cy in pixels (four numbers), got {} in `{s}`",
+            v.len()
+        ));
+    };
+    if !(v.iter().all(|x| x.is_finite()) && fx > 0.0 && fy > 0.0) {
+        return Err(format!(
+            "intrinsics `{s}`: all four must be finite and fx, fy > 0"
+        ));
+    }
+    Ok(IntrinsicsArg { fx, fy, cx, cy })
+}
+
+/// Parses a horizontal field of view [deg] in (0, 180).
+fn parse_hfov(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .parse()
+        .map_err(|_| format!("expected an angle in degrees, got `{s}`"))?;
+    if v.is_finite() && v > 0.0 && v < 180.0 {
+        Ok(v)
+    } else {
+        Err(format!(
+            "the field of view must be in (0, 180) degrees, got {v}"
+        ))
+    }
+}
+
+/// Camera options shared by `assess` and `trial` (used when the cues come from a camera,
+/// video, image folder or `.bag`).
+#[derive(Debug, Clone, PartialEq, Args)]
+pub(crate) struct CameraArgs {
+    /// Camera → workspace extrinsics TOML (written by `hrc-adapt calibrate`). Without it the
+    /// identity is used and every position is in the CAMERA frame (z = optical axis), so the
+    /// workspace areas will not match: a warning says so.
+    #[arg(long, value_name = "TOML")]
+    pub(crate) extrinsics: Option<PathBuf>,
+    /// Colour intrinsics `fx,fy,cx,cy` [px] for video files, image folders and webcams
+    /// (RealSense cameras and .bag files carry their own). Default: from --hfov.
+    #[arg(long, value_name = "FX,FY,CX,CY", value_parser = parse_intrinsics)]
+    pub(crate) intrinsics: Option<IntrinsicsArg>,
+    /// Horizontal field of view [deg] for the default intrinsics (the D435i colour camera: 69).
+    #[arg(long, value_name = "DEG", default_value_t = 69.0, value_parser = parse_hfov)]
+    pub(crate) hfov: f64,
+    /// Use the lite pose and hand models (faster, less accurate).
+    #[arg(long)]
+    pub(crate) lite: bool,
+}
+
+impl Default for CameraArgs {
+    fn default() -> Self {
+        Self {
+            extrinsics: None,
+            intrinsics: None,
+            hfov: 69.0,
+            lite: false,
+        }
+    }
+}
+
+/// The error for a camera input in a build without the `vision` feature.
+#[cfg(not(feature = "vision"))]
+pub(crate) fn vision_missing(input: &CueInput) -> anyhow::Error {
+    anyhow::anyhow!(
+        "--cues {}: camera inputs need the `vision` feature; this hrc-adapt was built without \
+         it (rebuild with default features)",
+        input
+            .path()
+            .map_or_else(|| format!("{input:?}"), |p| p.display().to_string())
+    )
+}
+
+#[cfg(feature = "vision")]
+pub(crate) use camera::*;
+
+#[cfg(feature = "vision")]
+mod camera {
+    use std::fmt::Write as _;
+    use std::fs::File;
+    use std::io::{BufWriter, Seek, SeekFrom, Write};
+    use std::path::{Path, PathBuf};
+
+    use anyhow::{Context as _, bail};
+    use assess::vision::cues::{CueConfig, CueExtractor, PerceivedCues, load_canonical_face};
+    use assess::vision::pipeline::{Mode, Pipeline, PipelineConfig, Variant};
+    use assess::vision::source::capture::{
+        VideoFileOptions, VideoFileSource, WebcamOptions, WebcamSource,
+    };
+    use assess::vision::source::folder::{ImageFolderOptions, ImageFolderSource};
+    use assess::vision::{
+        CameraFrame, Extrinsics, FrameSource, Intrinsics, Landmarks, RgbImage, draw, models,
+    };
+    use assess::{Assessment, Workspace};
+
+    use super::{CameraArgs, CueInput, IntrinsicsArg};
+
+    impl IntrinsicsArg {
+        /// As [`Intrinsics`] of a `width` × `height` image [px].
+        fn at_size(self, width: u32, height: u32) -> Intrinsics {
+            Intrinsics {
+                width,
+                height,
+                fx: self.fx,
+                fy: self.fy,
+                cx: self.cx,
+                cy: self.cy,
+            }
+        }
+    }
+
+    /// An opened frame source and, when known, how many frames it holds.
+    pub(crate) struct Opened {
+        /// The source.
+        pub(crate) source: Box<dyn FrameSource>,
+        /// The number of frames, for recordings that know it.
+        pub(crate) len: Option<u64>,
+    }
+
+    impl std::fmt::Debug for Opened {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.debug_struct("Opened")
+                .field("source", &self.source.describe())
+                .field("len", &self.len)
+                .finish()
+        }
+    }
+
+    /// Opens the frame source `input` names. `depth` is an aligned 16-bit PNG folder for a
+    /// video file or an image folder.
+    pub(crate) fn open_source(
+        input: &CueInput,
+        cam: &CameraArgs,
+        depth: Option<&Path>,
+    ) -> anyhow::Result<Opened> {
+        // Intrinsics given on the command line are checked against the first frame's size by
+        // the sources; the size is not known here, so it is filled in from the frame later
+        // (see `Perception::step`) and only fx, fy, cx, cy matter.
+        if depth.is_some() && !matches!(input, CueInput::Video(_) | CueInput::Images(_)) {
+            bail!("--depth applies to a video file or an image folder only");
+        }
+        let opened = match input {
+            CueInput::CueCsv(_) | CueInput::Kth(_) => {
+                bail!("internal: {input:?} is a cue file, not a frame source")
+            }
+            CueInput::Video(p) => {
+                let source = VideoFileSource::open(
+                    p,
+                    VideoFileOptions {
+                        intrinsics: None,
+                        hfov_deg: cam.hfov,
+                        fps: None,
+                        depth: depth.map(Path::to_path_buf),
+                    },
+                )?;
+                let len = source.frame_count();
+                Opened {
+                    source: Box::new(source),
+                    len,
+                }
+            }
+            CueInput::Images(p) => {
+                let source = ImageFolderSource::open(
+                    p,
+                    ImageFolderOptions {
+                        hfov_deg: cam.hfov,
+                        depth: depth.map(Path::to_path_buf),
+                        ..ImageFolderOptions::default()
+                    },
+                )?;
+                let len = Some(source.files().len() as u64);
+                Opened {
+                    source: Box::new(source),
+                    len,
+                }
+            }
+            CueInput::Bag(p) => open_bag(p)?,
+            CueInput::Camera => open_camera(cam)?,
+            CueInput::Webcam(n) => Opened {
+                source: Box::new(open_webcam(*n, cam)?),
+                len: None,
+            },
+        };
+        Ok(opened)
+    }
+
+    fn open_webcam(n: u32, cam: &CameraArgs) -> anyhow::Result<WebcamSource> {
+        WebcamSource::open(
+            n,
+            WebcamOptions {
+                hfov_deg: cam.hfov,
+                ..WebcamOptions::default()
+            },
+        )
+        .with_context(|| format!("cannot open webcam {n} (/dev/video{n})"))
+    }
+
+    #[cfg(feature = "realsense")]
+    fn open_bag(p: &Path) -> anyhow::Result<Opened> {
+        use assess::vision::source::realsense::RealSenseSource;
+        Ok(Opened {
+            source: Box::new(RealSenseSource::open_bag(p)?),
+            len: None,
+        })
+    }
+
+    #[cfg(not(feature = "realsense"))]
+    fn open_bag(p: &Path) -> anyhow::Result<Opened> {
+        bail!(
+            "--cues {}: RealSense .bag files need the `realsense` feature; this hrc-adapt was \
+             built without it (cargo build --release --features realsense, with librealsense2 \
+             from scripts/setup)",
+            p.display()
+        )
+    }
+
+    /// `camera`: the first RealSense device (feature `realsense`), else webcam 0; an error
+    /// naming both when neither is there.
+    fn open_camera(cam: &CameraArgs) -> anyhow::Result<Opened> {
+        #[cfg(feature = "realsense")]
+        let realsense_note = {
+            use assess::vision::source::realsense::{
+                RealSenseConfig, RealSenseSource, list_devices,
+            };
+            match list_devices() {
+                Ok(devices) if !devices.is_empty() => {
+                    let source = RealSenseSource::open_camera(&RealSenseConfig::default())?;
+                    return Ok(Opened {
+                        source: Box::new(source),
+                        len: None,
+                    });
+                }
+                Ok(_) => "no RealSense device is connected".to_string(),
+                Err(e) => format!("RealSense devices cannot be listed ({e})"),
+            }
+        };
+        #[cfg(not(feature = "realsense"))]
+        let realsense_note =
+            "RealSense cameras need the `realsense` feature, which this build lacks".to_string();
+        match open_webcam(0, cam) {
+            Ok(source) => Ok(Opened {
+                source: Box::new(source),
+                len: None,
+            }),
+            Err(e) => bail!(
+                "no camera found: {realsense_note}, and webcam 0 cannot be opened ({e:#}); \
+                 connect a camera, or pass a recording to --cues"
+            ),
+        }
+    }
+
+    /// Loads `--extrinsics`, or returns the identity with a loud warning.
+    pub(crate) fn load_extrinsics(cam: &CameraArgs) -> anyhow::Result<Extrinsics> {
+        match &cam.extrinsics {
+            Some(p) => Extrinsics::load(p)
+                .with_context(|| format!("cannot load the extrinsics {}", p.display())),
+            None => {
+                eprintln!(
+                    "WARNING: no --extrinsics given: using the identity, so every cue position \
+                     is in the CAMERA frame (x right, y down, z along the optical axis [m]), not \
+                     the workspace frame; the workspace areas will not line up. Calibrate with \
+                     `hrc-adapt calibrate` and pass --extrinsics."
+                );
+                Ok(Extrinsics::identity())
+            }
+        }
+    }
+
+    /// The pipeline settings for these options.
+    pub(crate) fn pipeline_config(cam: &CameraArgs, still: bool) -> PipelineConfig {
+        PipelineConfig {
+            variant: if cam.lite {
+                Variant::Lite
+            } else {
+                Variant::Full
+            },
+            mode: if still { Mode::Static } else { Mode::Tracking },
+            ..PipelineConfig::default()
+        }
+    }
+
+    /// Landmarks → cues for one camera: the landmark pipeline and the cue extractor.
+    #[derive(Debug)]
+    pub(crate) struct Perception {
+        pipeline: Pipeline,
+        extractor: CueExtractor,
+        intrinsics: Option<IntrinsicsArg>,
+    }
+
+    /// One frame's perception result.
+    #[derive(Debug)]
+    pub(crate) struct Perceived {
+        /// The landmarks [px].
+        pub(crate) landmarks: Landmarks,
+        /// The cues (workspace frame) and their quality.
+        pub(crate) cues: PerceivedCues,
+        /// The intrinsics used.
+        pub(crate) intrinsics: Intrinsics,
+    }
+
+    impl Perception {
+        /// Initialises ONNX Runtime, loads the models from [`models::model_dir`] and the
+        /// canonical face. `intrinsics` overrides the sources' (video, images, webcams).
+        pub(crate) fn load(
+            config: PipelineConfig,
+            extrinsics: Extrinsics,
+            intrinsics: Option<IntrinsicsArg>,
+        ) -> anyhow::Result<Self> {
+            models::init_runtime(None).context("cannot load ONNX Runtime")?;
+            let dir = models::model_dir();
+            let pipeline = Pipeline::load(&dir, config).with_context(|| {
+                format!("cannot load the landmark models from {}", dir.display())
+            })?;
+            let canonical = load_canonical_face(&dir.join("canonical_face_model.csv"))?;
+            let extractor = CueExtractor::new(CueConfig::default(), extrinsics, canonical)?;
+            Ok(Self {
+                pipeline,
+                extractor,
+                intrinsics,
+            })
+        }
+
+        /// Landmarks and cues of one frame (cue time = camera time).
+        pub(crate) fn step(&mut self, frame: &CameraFrame) -> anyhow::Result<Perceived> {
+            let intrinsics = self.intrinsics.map_or(frame.intrinsics, |i| {
+                i.at_size(frame.color.width, frame.color.height)
+            });
+            let landmarks = self
+                .pipeline
+                .process(&frame.color, frame.depth.as_ref())
+                .with_context(|| format!("landmarks of frame {}", frame.index))?;
+            let cues =
+                self.extractor
+                    .extract(frame.t, &landmarks, frame.depth.as_ref(), &intrinsics);
+            Ok(Perceived {
+                landmarks,
+                cues,
+                intrinsics,
+            })
+        }
+
+        /// The extrinsics in use.
+        pub(crate) fn extrinsics(&self) -> &Extrinsics {
+            self.extractor.extrinsics()
+        }
+    }
+
+    /// `landmarks.csv`: one row per landmark, `frame,t,set,index,x_px,y_px,score`.
+    ///
+    /// - `frame`: the source's frame number; `t`: camera time [s];
+    /// - `set`: `pose` (33), `face` (468), `hand0` / `hand1` (21 each, in the pipeline's
+    ///   order; which hand is left or right is in the cues);
+    /// - `x_px`, `y_px`: image position [px] (MediaPipe's continuous coordinates: pixel
+    ///   (u, v) spans [u, u + 1));
+    /// - `score` [-]: a pose landmark's visibility; for face and hands, the set's presence
+    ///   score.
+    #[derive(Debug)]
+    pub(crate) struct LandmarkCsv {
+        path: PathBuf,
+        out: BufWriter<File>,
+        line: String,
+    }
+
+    /// The header of `landmarks.csv`.
+    pub(crate) const LANDMARK_HEADER: &str = "frame,t,set,index,x_px,y_px,score";
+
+    impl LandmarkCsv {
+        /// Creates the file and writes the header.
+        pub(crate) fn create(path: &Path) -> anyhow::Result<Self> {
+            let file =
+                File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+            let mut out = BufWriter::new(file);
+            writeln!(out, "{LANDMARK_HEADER}")
+                .with_context(|| format!("cannot write {}", path.display()))?;
+            Ok(Self {
+                path: path.to_path_buf(),
+                out,
+                line: String::with_capacity(64),
+            })
+        }
+
+        /// Appends one frame's landmarks.
+        pub(crate) fn write(&mut self, frame: u64, t: f64, lm: &Landmarks) -> anyhow::Result<()> {
+            if let Some(pose) = &lm.pose {
+                for (i, p) in pose.points.iter().enumerate() {
+                    self.row(frame, t, "pose", i, p.x, p.y, p.visibility)?;
+                }
+            }
+            if let Some(face) = &lm.face {
+                for (i, p) in face.points.iter().enumerate() {
+                    self.row(frame, t, "face", i, p.x, p.y, face.score)?;
+                }
+            }
+            for (h, hand) in lm.hands.iter().enumerate() {
+                let set = if h == 0 { "hand0" } else { "hand1" };
+                for (i, p) in hand.points.iter().enumerate() {
+                    self.row(frame, t, set, i, p.x, p.y, hand.score)?;
+                }
+            }
+            Ok(())
+        }
+
+        #[allow(clippy::too_many_arguments)]
+        fn row(
+            &mut self,
+            frame: u64,
+            t: f64,
+            set: &str,
+            index: usize,
+            x: f64,
+            y: f64,
+            score: f64,
+        ) -> anyhow::Result<()> {
+            self.line.clear();
+            let _ = writeln!(
+                self.line,
+                "{frame},{t:.6},{set},{index},{x:.2},{y:.2},{score:.4}"
+            );
+            self.out
+                .write_all(self.line.as_bytes())
+                .with_context(|| format!("cannot write {}", self.path.display()))
+        }
+
+        /// Flushes the file.
+        pub(crate) fn finish(mut self) -> anyhow::Result<()> {
+            self.out
+                .flush()
+                .with_context(|| format!("cannot write {}", self.path.display()))
+        }
+    }
+
+    /// Where camera images go when the user asked for them: an `.avi` video or, for a path
+    /// without extension, a folder of numbered PNGs (`000000.png`, ...).
+    #[derive(Debug)]
+    pub(crate) enum ImageSink {
+        /// A PNG folder.
+        Pngs {
+            /// The folder.
+            dir: PathBuf,
+            /// Frames written.
+            n: u64,
+        },
+        /// An AVI file.
+        Avi(AviWriter),
+    }
+
+    impl ImageSink {
+        /// Creates the sink for `path`: `.avi` → video, no extension → PNG folder (created;
+        /// it must not exist or be empty); other extensions are refused.
+        pub(crate) fn create(path: &Path, flag: &str) -> anyhow::Result<Self> {
+            match path.extension().and_then(|e| e.to_str()) {
+                None => {
+                    if path.exists()
+                        && std::fs::read_dir(path)
+                            .with_context(|| format!("cannot list {}", path.display()))?
+                            .next()
+                            .is_some()
+                    {
+                        bail!(
+                            "{flag} {}: the folder exists and is not empty",
+                            path.display()
+                        );
+                    }
+                    std::fs::create_dir_all(path)
+                        .with_context(|| format!("cannot create {}", path.display()))?;
+                    Ok(Self::Pngs {
+                        dir: path.to_path_buf(),
+                        n: 0,
+                    })
+                }
+                Some(e) if e.eq_ignore_ascii_case("avi") => {
+                    if path.exists() {
+                        bail!("{flag} {}: the file exists", path.display());
+                    }
+                    Ok(Self::Avi(AviWriter::create(path)?))
+                }
+                Some(_) => bail!(
+                    "{flag} {}: expected an .avi file, or a path without extension for a PNG \
+                     folder",
+                    path.display()
+                ),
+            }
+        }
+
+        /// Appends one image at camera time `t` [s].
+        pub(crate) fn push(&mut self, image: &RgbImage, t: f64) -> anyhow::Result<()> {
+            match self {
+                Self::Pngs { dir, n } => {
+                    let p = dir.join(format!("{:06}.png", *n));
+                    assess::vision::calib::write_png(image, &p)
+                        .with_context(|| format!("cannot write {}", p.display()))?;
+                    *n += 1;
+                    Ok(())
+                }
+                Self::Avi(w) => w.push(image, t),
+            }
+        }
+
+        /// Closes the sink (writes the AVI index).
+        pub(crate) fn finish(self) -> anyhow::Result<()> {
+            match self {
+                Self::Pngs { .. } => Ok(()),
+                Self::Avi(w) => w.finish(),
+            }
+        }
+    }
+
+    /// A minimal AVI 1.0 writer (RIFF `AVI `, one video stream, `idx1` index) whose frames are
+    /// PNG-compressed (FourCC `MPNG`, which FFmpeg, OpenCV's FFmpeg backend, VLC and mpv play).
+    /// The frame rate in the header is the mean rate of the camera timestamps.
+    #[derive(Debug)]
+    pub(crate) struct AviWriter {
+        path: PathBuf,
+        out: BufWriter<File>,
+        size: Option<(u32, u32)>,
+        /// (offset from the `movi` FourCC, size) of each frame chunk.
+        index: Vec<(u32, u32)>,
+        max_chunk: u32,
+        first_t: f64,
+        last_t: f64,
+    }
+
+    /// Length of the RIFF and `hdrl` headers [bytes]; the `movi` list starts there.
+    const AVI_HEADER_LEN: u64 = 12 + 8 + 4 + (8 + 56) + 8 + 4 + (8 + 56) + (8 + 40);
+
+    impl AviWriter {
+        fn create(path: &Path) -> anyhow::Result<Self> {
+            let file =
+                File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+            Ok(Self {
+                path: path.to_path_buf(),
+                out: BufWriter::new(file),
+                size: None,
+                index: Vec::new(),
+                max_chunk: 0,
+                first_t: 0.0,
+                last_t: 0.0,
+            })
+        }
+
+        fn io<T>(&self, r: std::io::Result<T>) -> anyhow::Result<T> {
+            r.with_context(|| format!("cannot write {}", self.path.display()))
+        }
+
+        /// Writes the headers (placeholder sizes) and opens the `movi` list.
+        fn start(&mut self, w: u32, h: u32) -> anyhow::Result<()> {
+            let header = avi_header(w, h, 0, 30.0, 0, 0);
+            let r = self.out.write_all(&header);
+            self.io(r)?;
+            // LIST <size, patched at the end> movi
+            let r = self.out.write_all(b"LIST\0\0\0\0movi");
+            self.io(r)?;
+            self.size = Some((w, h));
+            Ok(())
+        }
+
+        fn push(&mut self, image: &RgbImage, t: f64) -> anyhow::Result<()> {
+            match self.size {
+                None => {
+                    self.start(image.width, image.height)?;
+                    self.first_t = t;
+                }
+                Some(s) if s != (image.width, image.height) => bail!(
+                    "{}: frame of {}×{} px in a {}×{} px video",
+                    self.path.display(),
+                    image.width,
+                    image.height,
+                    s.0,
+                    s.1
+                ),
+                Some(_) => {}
+            }
+            self.last_t = t;
+            let png = assess::vision::calib::encode_png(image)?;
+            let len = u32::try_from(png.len()).context("a PNG frame over 4 GiB")?;
+            let offset = self.index.last().map_or(4, |(o, s)| o + 8 + s + (s & 1));
+            self.index.push((offset, len));
+            self.max_chunk = self.max_chunk.max(len);
+            let mut chunk = Vec::with_capacity(png.len() + 9);
+            chunk.extend_from_slice(b"00dc");
+            chunk.extend_from_slice(&len.to_le_bytes());
+            chunk.extend_from_slice(&png);
+            if len & 1 == 1 {
+                chunk.push(0);
+            }
+            let r = self.out.write_all(&chunk);
+            self.io(r)
+        }
+
+        fn finish(mut self) -> anyhow::Result<()> {
+            let Some((w, h)) = self.size else {
+                // No frame: an empty file says nothing; remove it.
+                drop(self.out);
+                let _ = std::fs::remove_file(&self.path);
+                return Ok(());
+            };
+            let n = self.index.len() as u32;
+            let movi_len = self.index.last().map_or(4, |(o, s)| o + 8 + s + (s & 1));
+            let mut idx = Vec::with_capacity(8 + 16 * self.index.len());
+            idx.extend_from_slice(b"idx1");
+            idx.extend_from_slice(&(16 * n).to_le_bytes());
+            for (offset, size) in &self.index {
+                idx.extend_from_slice(b"00dc");
+                idx.extend_from_slice(&0x10u32.to_le_bytes()); // AVIIF_KEYFRAME
+                idx.extend_from_slice(&offset.to_le_bytes());
+                idx.extend_from_slice(&size.to_le_bytes());
+            }
+            let r = self.out.write_all(&idx);
+            self.io(r)?;
+            let fps = if n > 1 && self.last_t > self.first_t {
+                f64::from(n - 1) / (self.last_t - self.first_t)
+            } else {
+                30.0
+            };
+            let riff_len = (AVI_HEADER_LEN - 8) + 8 + u64::from(movi_len) + idx.len() as u64;
+            let riff_len = u32::try_from(riff_len).context("AVI over 4 GiB")?;
+            let header = avi_header(w, h, n, fps, self.max_chunk, riff_len);
+            let r = self.out.seek(SeekFrom::Start(0));
+            self.io(r)?;
+            let r = self.out.write_all(&header);
+            self.io(r)?;
+            let r = self.out.seek(SeekFrom::Start(AVI_HEADER_LEN + 4));
+            self.io(r)?;
+            let r = self.out.write_all(&movi_len.to_le_bytes());
+            self.io(r)?;
+            let r = self.out.flush();
+            self.io(r)?;
+            Ok(())
+        }
+    }
+
+    /// `RIFF AVI ` + `hdrl` (avih, strl(strh, strf)) for one `MPNG` video stream of `n` frames
+    /// of `w` × `h` px at `fps` [1/s].
+    fn avi_header(w: u32, h: u32, n: u32, fps: f64, max_chunk: u32, riff_len: u32) -> Vec<u8> {
+        let mut b = Vec::with_capacity(AVI_HEADER_LEN as usize);
+        let u32le = |b: &mut Vec<u8>, v: u32| b.extend_from_slice(&v.to_le_bytes());
+        let rate = (fps * 1000.0).round().clamp(1.0, f64::from(u32::MAX)) as u32;
+        b.extend_from_slice(b"RIFF");
+        u32le(&mut b, riff_len);
+        b.extend_from_slice(b"AVI ");
+        b.extend_from_slice(b"LIST");
+        u32le(&mut b, 4 + (8 + 56) + 8 + 4 + (8 + 56) + (8 + 40));
+        b.extend_from_slice(b"hdrl");
+        b.extend_from_slice(b"avih");
+        u32le(&mut b, 56);
+        u32le(&mut b, (1e6 / fps).round() as u32); // dwMicroSecPerFrame
+        u32le(
+            &mut b,
+            (f64::from(max_chunk) * fps).min(f64::from(u32::MAX)) as u32,
+        ); // dwMaxBytesPerSec
+        u32le(&mut b, 0); // dwPaddingGranularity
+        u32le(&mut b, 0x10); // dwFlags: AVIF_HASINDEX
+        u32le(&mut b, n); // dwTotalFrames
+        u32le(&mut b, 0); // dwInitialFrames
+        u32le(&mut b, 1); // dwStreams
+        u32le(&mut b, max_chunk); // dwSuggestedBufferSize
+        u32le(&mut b, w);
+        u32le(&mut b, h);
+        for _ in 0..4 {
+            u32le(&mut b, 0);
+        }
+        b.extend_from_slice(b"LIST");
+        u32le(&mut b, 4 + (8 + 56) + (8 + 40));
+        b.extend_from_slice(b"strl");
+        b.extend_from_slice(b"strh");
+        u32le(&mut b, 56);
+        b.extend_from_slice(b"vids");
+        b.extend_from_slice(b"MPNG");
+        u32le(&mut b, 0); // dwFlags
+        u32le(&mut b, 0); // wPriority, wLanguage
+        u32le(&mut b, 0); // dwInitialFrames
+        u32le(&mut b, 1000); // dwScale
+        u32le(&mut b, rate); // dwRate: rate / scale = fps
+        u32le(&mut b, 0); // dwStart
+        u32le(&mut b, n); // dwLength
+        u32le(&mut b, max_chunk); // dwSuggestedBufferSize
+        u32le(&mut b, u32::MAX); // dwQuality: default
+        u32le(&mut b, 0); // dwSampleSize
+        b.extend_from_slice(&0u16.to_le_bytes()); // rcFrame
+        b.extend_from_slice(&0u16.to_le_bytes());
+        b.extend_from_slice(&(w.min(u32::from(u16::MAX)) as u16).to_le_bytes());
+        b.extend_from_slice(&(h.min(u32::from(u16::MAX)) as u16).to_le_bytes());
+        b.extend_from_slice(b"strf");
+        u32le(&mut b, 40);
+        u32le(&mut b, 40); // biSize
+        u32le(&mut b, w); // biWidth
+        u32le(&mut b, h); // biHeight
+        b.extend_from_slice(&1u16.to_le_bytes()); // biPlanes
+        b.extend_from_slice(&24u16.to_le_bytes()); // biBitCount
+        b.extend_from_slice(b"MPNG"); // biCompression
+        u32le(&mut b, w * h * 3); // biSizeImage
+        for _ in 0..4 {
+            u32le(&mut b, 0);
+        }
+        b
+    }
+
+    /// Draws the monitoring view on a copy of the frame: landmarks, the workspace areas
+    /// projected with the extrinsics (the confirmed area highlighted), the head ray and the
+    /// live indicator values.
+    pub(crate) fn annotate(
+        frame: &CameraFrame,
+        p: &Perceived,
+        extrinsics: &Extrinsics,
+        workspace: &Workspace,
+        a: Option<&Assessment>,
+    ) -> anyhow::Result<RgbImage> {
+        let mut img = frame.color.clone();
+        let proj = draw::Projector::new(p.intrinsics, extrinsics);
+        draw::areas(&mut img, &proj, workspace, a.and_then(|a| a.confirmed))?;
+        draw::landmarks(&mut img, &p.landmarks)?;
+        if let Some(head) = &p.cues.frame.head {
+            draw::head_ray(&mut img, &proj, &head.position, &head.facing, 0.8)?;
+        }
+        let name = |id: Option<assess::AreaId>| {
+            id.and_then(|i| workspace.areas().get(i.0))
+                .map_or("none", |a| a.name.as_str())
+        };
+        let mut lines = vec![format!(
+            "t {:.3} s  frame {}  cues: {}",
+            frame.t,
+            frame.index,
+            p.cues.quality.name()
+        )];
+        if let Some(a) = a {
+            let w = &a.windowed;
+            lines.push(format!(
+                "F {}  (perceptual {}, action {})",
+                name(a.confirmed),
+                name(a.perceptual.0),
+                name(a.action.0)
+            ));
+            lines.push(format!(
+                "AED {:.2}  TID {:.2}  ICD {:.2}  ASD {:.2}/s  OHD {:.2}",
+                w.aed, w.tid, w.icd, w.asd_ctx, w.ohd
+            ));
+            lines.push(format!(
+                "HRC-CWL {:.2} ({})  dominant {}",
+                w.hrc_cwl,
+                w.category.name(),
+                a.dominant.indicator.map_or("none", |i| i.name())
+            ));
+        }
+        draw::text_lines(&mut img, &lines, draw::WHITE)?;
+        Ok(img)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn inputs_are_classified_by_keyword_extension_and_contents() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        assert_eq!(
+            CueInput::parse(Path::new("camera")).unwrap(),
+            CueInput::Camera
+        );
+        assert_eq!(
+            CueInput::parse(Path::new("webcam:2")).unwrap(),
+            CueInput::Webcam(2)
+        );
+        let e = CueInput::parse(Path::new("webcam:x"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("expected webcam:N"), "{e}");
+        for (name, want) in [
+            ("c.csv", CueInput::CueCsv(d.join("c.csv"))),
+            ("r.MP4", CueInput::Video(d.join("r.MP4"))),
+            ("r.avi", CueInput::Video(d.join("r.avi"))),
+            ("r.mkv", CueInput::Video(d.join("r.mkv"))),
+            ("r.mov", CueInput::Video(d.join("r.mov"))),
+            ("r.bag", CueInput::Bag(d.join("r.bag"))),
+        ] {
+            fs::write(d.join(name), b"x").unwrap();
+            assert_eq!(CueInput::parse(&d.join(name)).unwrap(), want, "{name}");
+        }
+        fs::write(d.join("notes.txt"), b"x").unwrap();
+        let e = CueInput::parse(&d.join("notes.txt"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unsupported input"), "{e}");
+        let e = CueInput::parse(&d.join("missing.mp4")).unwrap_err();
+        assert!(
+            format!("{e:#}").starts_with(&format!(
+                "cannot read the cues {}",
+                d.join("missing.mp4").display()
+            )),
+            "{e:#}"
+        );
+        let images = d.join("images");
+        fs::create_dir(&images).unwrap();
+        fs::write(images.join("a.JPG"), b"x").unwrap();
+        assert_eq!(CueInput::parse(&images).unwrap(), CueInput::Images(images));
+        let kth = d.join("kth");
+        fs::create_dir(&kth).unwrap();
+        fs::write(kth.join("taker_head_pose_saved.csv"), b"x").unwrap();
+        assert_eq!(CueInput::parse(&kth).unwrap(), CueInput::Kth(kth));
+        assert!(CueInput::Camera.is_live() && CueInput::Camera.is_camera());
+        assert!(!CueInput::CueCsv(d.join("c.csv")).is_camera());
+    }
+
+    #[test]
+    fn intrinsics_and_fov_are_validated() {
+        assert_eq!(
+            parse_intrinsics("600, 610,320,240.5").unwrap(),
+            IntrinsicsArg {
+                fx: 600.0,
+                fy: 610.0,
+                cx: 320.0,
+                cy: 240.5
+            }
+        );
+        assert!(
+            parse_intrinsics("600,610,320")
+                .unwrap_err()
+                .contains("got 3")
+        );
+        assert!(
+            parse_intrinsics("a,b,c,d")
+                .unwrap_err()
+                .contains("four numbers")
+        );
+        assert!(
+            parse_intrinsics("0,610,320,240")
+                .unwrap_err()
+                .contains("fx, fy > 0")
+        );
+        assert_eq!(parse_hfov("69").unwrap(), 69.0);
+        assert!(parse_hfov("180").is_err());
+        assert!(parse_hfov("-3").is_err());
+    }
+}
