@@ -1,6 +1,7 @@
-//! Cue sources of a trial: the **simulated operator** (the default, `operator.rs`) or a
+//! Cue sources of a trial: the **simulated operator** (the default, `operator.rs`), a
 //! **recorded cue file** (`hrc-adapt trial --cues <file.csv>`, the cue CSV format of
-//! `assess::io::cue_csv`).
+//! `assess::io::cue_csv`) or a **live camera** (`--cues camera`, feature `vision`: see
+//! `live.rs`).
 //!
 //! A recorded file is replayed **by time, sample-and-hold**: at each assessment instant (the
 //! cue rate, 30 Hz) the runtime uses the frame with the latest `t` ≤ trial time, where the
@@ -26,6 +27,19 @@ pub(crate) enum CueSource {
     Simulated,
     /// A recorded cue CSV, replayed by time (open loop).
     Recorded(PathBuf),
+    /// A live camera, perceived in its own thread (feature `vision`).
+    Camera(CameraSpec),
+}
+
+/// A live cue source: the camera, how to read it, whether to store its video.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct CameraSpec {
+    /// The frame source (`Camera`, `Webcam(n)`; the tests use an image folder).
+    pub(crate) input: crate::vision_cmd::CueInput,
+    /// Extrinsics, intrinsics, model variant.
+    pub(crate) camera: crate::vision_cmd::CameraArgs,
+    /// Store the raw camera images here (`.avi` or a PNG folder); `None`: never (privacy).
+    pub(crate) store_video: Option<PathBuf>,
 }
 
 /// A recorded cue file being replayed.

@@ -18,6 +18,8 @@ mod backend;
 pub(crate) mod config;
 mod cues;
 mod events;
+#[cfg(feature = "vision")]
+mod live;
 mod log;
 pub(crate) mod operator;
 mod report;
@@ -55,14 +57,25 @@ pub(crate) struct TrialArgs {
     /// clock), `sim` (in-process, mock clock, deterministic) or a UR5e's address.
     #[arg(long, default_value = "emulator")]
     robot: String,
-    /// `--robot emulator`: controller cycles the emulator runs per 2 ms of wall time.
-    #[arg(long, default_value_t = 4)]
-    speedup: u32,
+    /// `--robot emulator`: controller cycles the emulator runs per 2 ms of wall time
+    /// (default 4; a live camera needs 1, its default then).
+    #[arg(long)]
+    speedup: Option<u32>,
     /// Replay this recorded cue CSV (the `assess::io::cue_csv` format) instead of the simulated
     /// operator: sample-and-hold by time; the trial ends when the file ends ("cues_ended") or
-    /// the task completes. The recorded operator does not react to the robot.
+    /// the task completes. The recorded operator does not react to the robot. `camera` (a
+    /// RealSense camera with feature `realsense`, else the first webcam) or `webcam:N` take
+    /// the cues from a live camera instead; the trial fails if there is none. The run folder
+    /// then holds cues and landmarks only, no images (see --store-video).
     #[arg(long)]
     cues: Option<PathBuf>,
+    /// Live camera options (with `--cues camera` or `webcam:N`).
+    #[command(flatten)]
+    camera: crate::vision_cmd::CameraArgs,
+    /// With a live camera: ALSO STORE THE RAW CAMERA IMAGES here (an .avi with PNG frames, or
+    /// a folder of PNGs for a path without extension). Without it no image is stored.
+    #[arg(long, value_name = "PATH")]
+    store_video: Option<PathBuf>,
     /// Folder under which the run folder is created.
     #[arg(long, default_value = "runs")]
     out_root: PathBuf,
@@ -81,11 +94,26 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
         seed: args.seed,
         config,
     };
+    let cues = cue_source(&args)?;
+    let live = matches!(cues, cues::CueSource::Camera(_));
     let robot = match args.robot.as_str() {
+        "sim" if live => anyhow::bail!(
+            "--robot sim runs on a mock clock as fast as the CPU allows, which a live camera \
+             cannot follow; use --robot emulator (real time with a camera) or a UR5e"
+        ),
         "sim" => runtime::RobotChoice::Sim,
-        "emulator" => runtime::RobotChoice::Emulator {
-            speedup: args.speedup,
-        },
+        "emulator" => {
+            let speedup = match (args.speedup, live) {
+                (Some(s), true) if s != 1 => anyhow::bail!(
+                    "--speedup {s}: a live camera runs in real time, so the emulator must too \
+                     (--speedup 1, the default with a camera)"
+                ),
+                (Some(s), _) => s,
+                (None, true) => 1,
+                (None, false) => 4,
+            };
+            runtime::RobotChoice::Emulator { speedup }
+        }
         host => runtime::RobotChoice::Ur(host.to_owned()),
     };
     // The wall clock is used only for the folder name.
@@ -112,10 +140,6 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
     install_ctrl_c(stop.clone());
     let bar = runtime::progress_bar(true);
     let started = std::time::Instant::now();
-    let cues = args
-        .cues
-        .clone()
-        .map_or(cues::CueSource::Simulated, cues::CueSource::Recorded);
     let out = runtime::run_trial_with_cues(&spec, &robot, &cues, &dir, &stop, &mut |l| {
         runtime::update_bar(&bar, l)
     })?;
@@ -123,13 +147,19 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
     if stop.load(Ordering::Relaxed) {
         eprintln!("interrupted: robot stopped, logs closed");
     }
-    match &args.cues {
-        None => eprintln!(
+    match (&args.cues, live) {
+        (None, _) => eprintln!(
             "[simulation] trial on {} finished in {:.1} s wall time",
             args.robot,
             started.elapsed().as_secs_f64()
         ),
-        Some(p) => eprintln!(
+        (Some(p), true) => eprintln!(
+            "[live camera {}] trial on {} finished in {:.1} s wall time",
+            p.display(),
+            args.robot,
+            started.elapsed().as_secs_f64()
+        ),
+        (Some(p), false) => eprintln!(
             "[recorded cues {}] trial on {} finished in {:.1} s wall time",
             p.display(),
             args.robot,
@@ -138,6 +168,47 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
     }
     println!("{}", out.display());
     Ok(())
+}
+
+/// The trial's cue source from `--cues`: none → simulated operator; `camera` / `webcam:N` →
+/// live camera; anything else → a recorded cue CSV. Camera options without a camera are
+/// refused.
+fn cue_source(args: &TrialArgs) -> anyhow::Result<cues::CueSource> {
+    use crate::vision_cmd::CueInput;
+    let input = match &args.cues {
+        None => None,
+        Some(p) => match p.to_str() {
+            Some(s) if s == "camera" || s.starts_with("webcam:") => Some(CueInput::parse(p)?),
+            _ => None,
+        },
+    };
+    let Some(input) = input else {
+        let c = &args.camera;
+        let given: Vec<&str> = [
+            (c.extrinsics.is_some(), "--extrinsics"),
+            (c.intrinsics.is_some(), "--intrinsics"),
+            (c.lite, "--lite"),
+            (args.store_video.is_some(), "--store-video"),
+        ]
+        .into_iter()
+        .filter_map(|(given, name)| given.then_some(name))
+        .collect();
+        anyhow::ensure!(
+            given.is_empty(),
+            "{} need{} a live camera (--cues camera or webcam:N)",
+            given.join(", "),
+            if given.len() == 1 { "s" } else { "" }
+        );
+        return Ok(args
+            .cues
+            .clone()
+            .map_or(cues::CueSource::Simulated, cues::CueSource::Recorded));
+    };
+    Ok(cues::CueSource::Camera(cues::CameraSpec {
+        input,
+        camera: args.camera.clone(),
+        store_video: args.store_video.clone(),
+    }))
 }
 
 /// Sets `stop` on every Ctrl-C (a small thread with a current-thread tokio runtime).

@@ -813,12 +813,21 @@ th{{background:#f3f3f3}}img{{max-width:100%;border:1px solid #eee}}\
             "emulator" => "emulated (controller emulator)",
             _ => "real UR5e",
         };
-        let _ = writeln!(
-            h,
-            "<div class=\"sim\">RECORDED CUES — operator cues replayed from {}; the recorded operator does not react to the robot. Robot: {}.</div>",
-            esc(src),
-            esc(robot)
-        );
+        if let Some(camera) = src.strip_prefix("camera:") {
+            let _ = writeln!(
+                h,
+                "<div class=\"sim\">LIVE CAMERA — operator cues perceived live from {}. Robot: {}.</div>",
+                esc(camera),
+                esc(robot)
+            );
+        } else {
+            let _ = writeln!(
+                h,
+                "<div class=\"sim\">RECORDED CUES — operator cues replayed from {}; the recorded operator does not react to the robot. Robot: {}.</div>",
+                esc(src),
+                esc(robot)
+            );
+        }
     }
     let _ = writeln!(h, "<h1>{}</h1>", esc(&title));
     let _ = writeln!(h, "<table>");

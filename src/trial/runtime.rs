@@ -27,6 +27,8 @@ use safety::{Supervisor, SupervisorConfig, Verdict, WorldView};
 use super::config::TrialConfig;
 use super::cues::{CueSource, RecordedCues};
 use super::events::TrialEvent;
+#[cfg(feature = "vision")]
+use super::live::LiveCues;
 use super::log::{LogOptions, TrialLog, TrialMeta};
 use super::operator::{Level, RobotView, SimulatedOperator};
 
@@ -248,8 +250,15 @@ pub(crate) fn run_trial_with_cues(
 ) -> anyhow::Result<PathBuf> {
     let cfg = &spec.config;
     let recorded = match cues {
-        CueSource::Simulated => None,
         CueSource::Recorded(p) => Some(RecordedCues::load(p)?),
+        CueSource::Simulated | CueSource::Camera(_) => None,
+    };
+    let live = match cues {
+        #[cfg(feature = "vision")]
+        CueSource::Camera(spec) => Some(LiveCues::start(spec, out_dir)?),
+        #[cfg(not(feature = "vision"))]
+        CueSource::Camera(spec) => return Err(crate::vision_cmd::vision_missing(&spec.input)),
+        CueSource::Simulated | CueSource::Recorded(_) => None,
     };
     let workspace = Workspace::from_toml_file(&cfg.workspace)
         .with_context(|| format!("workspace {}", cfg.workspace.display()))?;
@@ -270,6 +279,7 @@ pub(crate) fn run_trial_with_cues(
         ctl_cfg,
         table,
         recorded,
+        live,
     };
     let home = setup.ctl_cfg.task.home_q_rad;
     match robot {
@@ -331,6 +341,26 @@ struct Setup {
     table: RuleTable,
     /// The recorded cue file replayed instead of the simulated operator's cues.
     recorded: Option<RecordedCues>,
+    /// The live camera used instead of the simulated operator's cues.
+    live: Option<LiveCues>,
+}
+
+/// Without the `vision` feature there is no live source (the type is never built).
+#[cfg(not(feature = "vision"))]
+#[derive(Debug)]
+enum LiveCues {}
+
+#[cfg(not(feature = "vision"))]
+impl LiveCues {
+    fn label(&self) -> &str {
+        match *self {}
+    }
+    fn hold(&mut self, _tc: f64, _out: &mut CueFrame) -> Option<f64> {
+        match *self {}
+    }
+    fn finish(self) -> anyhow::Result<()> {
+        match self {}
+    }
 }
 
 /// The trial loop on any robot.
@@ -352,7 +382,10 @@ fn drive<R: Robot>(
         ctl_cfg,
         table,
         mut recorded,
+        live: mut camera,
     } = setup;
+    // The operator is simulated only when no recorded or live cues replace it.
+    let simulated = recorded.is_none() && camera.is_none();
     let mut policy = spec.policy.build(&table);
     let mut assessor = Assessor::new(workspace.clone(), assess_cfg.clone())?;
     let mut operator = SimulatedOperator::new(spec.condition, &workspace, spec.seed)?;
@@ -363,9 +396,12 @@ fn drive<R: Robot>(
         condition: spec.condition.as_str().to_owned(),
         policy: spec.policy.as_str().to_owned(),
         seed: spec.seed,
-        // A recorded operator is not simulated (the robot may still be: see `robot`).
-        simulated: recorded.is_none(),
-        cue_source: recorded.as_ref().map(|r| r.label().to_owned()),
+        // A recorded or live operator is not simulated (the robot may still be: see `robot`).
+        simulated,
+        cue_source: recorded
+            .as_ref()
+            .map(|r| r.label().to_owned())
+            .or_else(|| camera.as_ref().map(|l| l.label().to_owned())),
         // Wall clock: only in trial.mcap's /trial/meta and the report, never in summary.json.
         started_utc: super::utc_now_iso(),
         robot: robot_label.to_owned(),
@@ -473,20 +509,27 @@ fn drive<R: Robot>(
                 tcp_peak_acc_m_s2: peak_acc,
             };
             peak_acc = 0.0;
-            let cue_t = match recorded.as_mut() {
-                None => {
-                    operator.step(tc, &view, &mut frame);
-                    for e in operator.events() {
-                        log.event(tc, e)?;
-                    }
-                    tc
-                }
-                Some(r) => {
+            let cue_t = match (recorded.as_mut(), camera.as_mut()) {
+                (Some(r), _) => {
                     if r.ended(tc) {
                         reason = "cues_ended";
                         break;
                     }
                     r.hold(tc, &mut frame)
+                }
+                (None, Some(l)) => match l.hold(tc, &mut frame) {
+                    Some(t) => t,
+                    None => {
+                        reason = "cues_ended";
+                        break;
+                    }
+                },
+                (None, None) => {
+                    operator.step(tc, &view, &mut frame);
+                    for e in operator.events() {
+                        log.event(tc, e)?;
+                    }
+                    tc
                 }
             };
             frame.robot = RobotContext {
@@ -528,16 +571,17 @@ fn drive<R: Robot>(
             humans.head_m = frame.head.as_ref().map(|h| to_base(&h.position));
             humans.left_hand_m = frame.hands[0].as_ref().map(|h| to_base(&h.position));
             humans.right_hand_m = frame.hands[1].as_ref().map(|h| to_base(&h.position));
-            // A held recorded frame is as old as its file time.
+            // A held recorded or camera frame is as old as its (mapped) time.
             last_cue_t = cue_t;
             live.t_s = tc;
             live.hrc_cwl = a.windowed.hrc_cwl;
             live.dominant = policies::indicator_key(a.dominant.indicator);
             live.handovers_done = done;
             progress(&live);
-            let finished = match recorded {
-                None => operator.finished(),
-                Some(_) => done >= n_handovers,
+            let finished = if simulated {
+                operator.finished()
+            } else {
+                done >= n_handovers
             };
             if finished {
                 reason = "completed";
@@ -582,7 +626,7 @@ fn drive<R: Robot>(
                     log.event(t, &TrialEvent::PartReturned { handover: started })?
                 }
                 TaskEventKind::ReleaseConfirmed => {
-                    if recorded.is_none() {
+                    if simulated {
                         operator.release_confirmed();
                         for e in operator.events() {
                             log.event(t, e)?;
@@ -639,6 +683,15 @@ fn drive<R: Robot>(
     }
     log.event(t_end, &TrialEvent::Finished { reason })?;
     let dir = log.finish()?.dir;
+    if let Some(camera) = camera {
+        // The camera or the inference failed: the trial ended early ("cues_ended").
+        camera.finish().with_context(|| {
+            format!(
+                "the live camera failed; the logs up to then are in {}",
+                dir.display()
+            )
+        })?;
+    }
     anyhow::ensure!(
         reason != "robot_program_stopped",
         "the robot's control program stopped at t = {t:.3} s (runtime state {}); the logs up \
@@ -707,7 +760,7 @@ pub(crate) fn progress_bar(show: bool) -> indicatif::ProgressBar {
 
 /// Shows the live values (every 30th call: once per simulated second at 30 Hz).
 pub(crate) fn update_bar(bar: &indicatif::ProgressBar, l: &Live) {
-    if bar.is_hidden() || (l.t_s * 30.0).round() as u64 % 30 != 0 {
+    if bar.is_hidden() || !((l.t_s * 30.0).round() as u64).is_multiple_of(30) {
         return;
     }
     bar.set_message(format!(
