@@ -38,8 +38,10 @@ const TABLE_FILE: &str = "indicators.csv";
 /// The configuration in force, inside `--out`.
 const CONFIG_FILE: &str = "assess_config.toml";
 /// Camera inputs: the cues, in the cue CSV format, inside `--out`.
+#[cfg(feature = "vision")]
 const CUES_FILE: &str = "cues.csv";
 /// Camera inputs: the landmarks, inside `--out`.
+#[cfg(feature = "vision")]
 const LANDMARKS_FILE: &str = "landmarks.csv";
 
 /// Arguments of `hrc-adapt assess`.

@@ -89,6 +89,7 @@ impl CueInput {
     }
 
     /// Whether the source is live (never ends by itself).
+    #[cfg_attr(not(feature = "vision"), allow(dead_code))]
     pub(crate) fn is_live(&self) -> bool {
         matches!(self, Self::Camera | Self::Webcam(_))
     }
