@@ -396,9 +396,7 @@ fn depth_toml_is_validated() {
     ];
     for (text, key) in cases {
         std::fs::write(dir.path().join("depth.toml"), text).expect("write");
-        let msg = DepthSequence::open(dir.path())
-            .expect_err(text)
-            .to_string();
+        let msg = DepthSequence::open(dir.path()).expect_err(text).to_string();
         assert!(
             msg.contains(key) && msg.contains("depth.toml"),
             "{text}: {msg}"
