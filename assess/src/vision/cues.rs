@@ -206,17 +206,48 @@ impl Smoother {
     }
 }
 
+/// The state of a cue with a position and a facing (head, body): temporal consistency and
+/// One-Euro smoothing, in the workspace frame.
+#[derive(Debug, Clone, Copy)]
+struct OrientedCue {
+    track: Track,
+    smooth: Smoother,
+}
+
+impl OrientedCue {
+    fn new(cfg: &CueConfig) -> Self {
+        Self {
+            track: Track::default(),
+            smooth: Smoother::new(cfg),
+        }
+    }
+
+    /// A camera-frame observation (point [m], facing, confidence) → smoothed workspace
+    /// position [m], facing and confidence scaled by temporal consistency.
+    fn observe(
+        &mut self,
+        t: f64,
+        (p, f, c): (Point3<f64>, Vector3<f64>, f64),
+        extrinsics: &Extrinsics,
+        max_speed: f64,
+    ) -> (Vec3, Vec3, f64) {
+        let pw = extrinsics.point_to_world(&p);
+        let fw = extrinsics.dir_to_world(&f);
+        let consistency = self.track.factor(t, pw, max_speed);
+        let (ps, fs) = self.smooth.apply(t, pw.coords, fw);
+        (ps, fs, (c * consistency).clamp(0.0, 1.0))
+    }
+}
+
 /// Turns landmarks into cues, frame by frame (it keeps filter and consistency state).
 #[derive(Debug)]
 pub struct CueExtractor {
     config: CueConfig,
     extrinsics: Extrinsics,
     canonical: Vec<Point3<f64>>,
-    head_track: Track,
-    body_track: Track,
+    head_cue: OrientedCue,
+    body_cue: OrientedCue,
     hand_tracks: [Track; 2],
-    head_smooth: Smoother,
-    body_smooth: Smoother,
     scratch: Vec<f64>,
 }
 
@@ -234,13 +265,11 @@ impl CueExtractor {
             ));
         }
         Ok(Self {
-            head_smooth: Smoother::new(&config),
-            body_smooth: Smoother::new(&config),
+            head_cue: OrientedCue::new(&config),
+            body_cue: OrientedCue::new(&config),
             config,
             extrinsics,
             canonical,
-            head_track: Track::default(),
-            body_track: Track::default(),
             hand_tracks: [Track::default(); 2],
             scratch: Vec::with_capacity(64),
         })
@@ -287,14 +316,13 @@ impl CueExtractor {
         });
         if let Some((p, f, c)) = head {
             head_camera = Some((p, f));
-            let pw = self.extrinsics.point_to_world(&p);
-            let fw = self.extrinsics.dir_to_world(&f);
-            let consistency = self.head_track.factor(t, pw, self.config.max_speed_m_s);
-            let (ps, fs) = self.head_smooth.apply(t, pw.coords, fw);
+            let (position, facing, confidence) =
+                self.head_cue
+                    .observe(t, (p, f, c), &self.extrinsics, self.config.max_speed_m_s);
             frame.head = Some(HeadCue {
-                position: ps,
-                facing: fs,
-                confidence: (c * consistency).clamp(0.0, 1.0),
+                position,
+                facing,
+                confidence,
             });
         }
 
@@ -314,14 +342,13 @@ impl CueExtractor {
             if q == CueQuality::Image2d {
                 quality = CueQuality::Image2d;
             }
-            let pw = self.extrinsics.point_to_world(&p);
-            let fw = self.extrinsics.dir_to_world(&f);
-            let consistency = self.body_track.factor(t, pw, self.config.max_speed_m_s);
-            let (ps, fs) = self.body_smooth.apply(t, pw.coords, fw);
+            let (position, facing, confidence) =
+                self.body_cue
+                    .observe(t, (p, f, c), &self.extrinsics, self.config.max_speed_m_s);
             frame.body = Some(BodyCue {
-                position: ps,
-                facing: fs,
-                confidence: (c * consistency).clamp(0.0, 1.0),
+                position,
+                facing,
+                confidence,
             });
         }
 
