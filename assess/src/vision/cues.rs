@@ -504,10 +504,10 @@ impl CueExtractor {
             let hv = (p[23].y + p[24].y) / 2.0;
             match self.point3(hu, hv, depth, intr, fallback_z, r_px) {
                 Some((h, _)) => (mid - h, 1.0),
-                None => (self.up_from_nose(p, mid, depth, intr, fallback_z)?, 0.7),
+                None => (self.up_from_nose(p, mid, intr)?, 0.7),
             }
         } else {
-            (self.up_from_nose(p, mid, depth, intr, fallback_z)?, 0.7)
+            (self.up_from_nose(p, mid, intr)?, 0.7)
         };
         let normal = across.cross(&up);
         if normal.norm() < 1e-6 || !normal.iter().all(|v| v.is_finite()) {
@@ -522,24 +522,19 @@ impl CueExtractor {
         Some((mid, normal.normalize(), score * conf_factor, quality))
     }
 
-    /// "Up" from the shoulder midpoint to the nose, with its forward part removed by
-    /// orthogonalising against the camera ray (the nose sits in front of the shoulder line).
+    /// "Up" from the shoulder midpoint to the nose, with the nose lifted at the shoulders'
+    /// depth: its own depth lies in front of the torso plane and would tilt the normal down.
     fn up_from_nose(
-        &mut self,
+        &self,
         p: &[Landmark; 33],
         mid: Point3<f64>,
-        depth: Option<&DepthImage>,
         intr: &Intrinsics,
-        fallback_z: Option<f64>,
     ) -> Option<Vector3<f64>> {
         let nose = &p[0];
         if nose.visibility < self.config.min_visibility {
             return None;
         }
-        // Lift the nose at the shoulders' depth: its own depth is forward of the torso plane.
-        let z = mid.z;
-        let _ = (depth, fallback_z);
-        let n = intr.deproject(nose.x, nose.y, z);
+        let n = intr.deproject(nose.x, nose.y, mid.z);
         let up = n - mid;
         (up.norm() > 1e-6).then_some(up)
     }

@@ -780,7 +780,6 @@ impl Pipeline {
         if self.config.mode == Mode::Static {
             self.reset();
         }
-        let size = (image.width, image.height);
         out.pose = self.pose(image, depth)?;
         if self.config.face {
             out.face = self.face(image, depth, out.pose.as_ref())?;
@@ -791,7 +790,6 @@ impl Pipeline {
                 out.hands.retain(|h| belongs_to(h, pose));
             }
         }
-        let _ = size;
         self.frame += 1;
         self.runs.frames += 1;
         self.last_t = Some(t);
