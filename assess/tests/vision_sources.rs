@@ -1,15 +1,16 @@
-//! Video-file, webcam and image-folder frame sources (feature `vision`): files written with
-//! OpenCV into a temporary folder and read back.
+//! Video-file, webcam and image-folder frame sources and the MJPG video sink (feature
+//! `vision`): files written with OpenCV (or the sink) into a temporary folder and read back.
 #![cfg(feature = "vision")]
 
 use std::path::Path;
 
 use assess::AssessError;
 use assess::vision::source::capture::{
-    DepthSequence, VideoFileOptions, VideoFileSource, WebcamOptions, WebcamSource, write_depth_png,
+    DepthSequence, VideoFileOptions, VideoFileSource, VideoSink, WebcamOptions, WebcamSource,
+    write_depth_png,
 };
 use assess::vision::source::folder::{ImageFolderOptions, ImageFolderSource};
-use assess::vision::{CameraFrame, DepthImage, FrameSource, Intrinsics};
+use assess::vision::{CameraFrame, DepthImage, FrameSource, Intrinsics, RgbImage};
 use opencv::core::{self, Mat, Rect, Scalar, Size};
 use opencv::prelude::*;
 use opencv::{imgcodecs, imgproc, videoio};
@@ -215,7 +216,7 @@ fn video_file_with_depth_sequence_and_intrinsics() {
     }
     let msg = src.next_frame().expect_err("missing").to_string();
     assert!(
-        msg.contains("000003.png") && msg.contains("missing"),
+        msg.contains("000003.png") && msg.contains("no such depth image file"),
         "{msg}"
     );
 }
@@ -442,4 +443,177 @@ fn a_missing_webcam_is_an_error() {
     let err = WebcamSource::open(97, WebcamOptions::default()).expect_err("no /dev/video97");
     assert!(matches!(err, AssessError::Source { .. }), "{err:?}");
     assert!(err.to_string().contains("webcam 97"), "{err}");
+}
+
+/// An RGB image of `w` x `h` px: grey `level`, with a pure-red 40 x 40 patch at the top left
+/// and pure blue at the top right (the RGB twin of `bgr_frame`).
+fn rgb_frame(w: u32, h: u32, level: u8) -> RgbImage {
+    let mut img = RgbImage::black(w, h);
+    for v in 0..h {
+        for u in 0..w {
+            let px = if v < 40 && u < 40 {
+                [255, 0, 0]
+            } else if v < 40 && u >= w - 40 {
+                [0, 0, 255]
+            } else {
+                [level; 3]
+            };
+            let i = ((v * w + u) * 3) as usize;
+            img.data[i..i + 3].copy_from_slice(&px);
+        }
+    }
+    img
+}
+
+#[test]
+fn video_sink_writes_mjpg_that_reads_back() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("view.AVI");
+    let mut sink = VideoSink::create(&path, 20.0).expect("create");
+    assert_eq!(sink.size(), None);
+    assert!(!path.exists(), "nothing is written before the first frame");
+    for k in 0..4u8 {
+        sink.write(&rgb_frame(W as u32, H as u32, 60 + 10 * k))
+            .expect("write");
+    }
+    assert_eq!(sink.size(), Some((W as u32, H as u32)));
+    // A frame of another size is refused, names the file, and is not written.
+    let err = sink.write(&rgb_frame(80, 60, 0)).expect_err("size");
+    assert!(matches!(err, AssessError::Source { .. }), "{err:?}");
+    let msg = err.to_string();
+    assert!(
+        msg.contains("view.AVI") && msg.contains("80 x 60") && msg.contains("160 x 120"),
+        "{msg}"
+    );
+    assert_eq!(sink.frames(), 4);
+    sink.finish().expect("finish");
+
+    let mut src = VideoFileSource::open(&path, VideoFileOptions::default()).expect("open");
+    assert_eq!(src.fps(), 20.0);
+    let frames = read_all(&mut src);
+    assert_eq!(frames.len(), 4);
+    for (k, f) in frames.iter().enumerate() {
+        assert_eq!((f.color.width, f.color.height), (W as u32, H as u32));
+        // RGB in, RGB out (no channel swap); MJPG is lossy.
+        assert_red_and_blue(f, 40);
+        let g = pixel(f, 80, 100);
+        assert!(
+            g.iter()
+                .all(|&c| (i32::from(c) - (60 + 10 * k as i32)).abs() <= 4),
+            "frame {k}: {g:?}"
+        );
+    }
+    for pair in frames.windows(2) {
+        assert!((pair[1].t - pair[0].t - 0.05).abs() < 1e-3);
+    }
+}
+
+#[test]
+fn video_sink_refuses_other_containers_and_writes_nothing_without_frames() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let err = VideoSink::create(dir.path().join("view.mp4"), 30.0).expect_err("mp4");
+    assert!(matches!(err, AssessError::Source { .. }), "{err:?}");
+    assert!(err.to_string().contains("view.mp4"), "{err}");
+    let err = VideoSink::create(dir.path().join("view.avi"), 0.0).expect_err("fps");
+    assert!(err.to_string().contains("fps"), "{err}");
+    let path = dir.path().join("empty.avi");
+    VideoSink::create(&path, 30.0)
+        .expect("create")
+        .finish()
+        .expect("finish");
+    assert!(!path.exists());
+    // An unwritable place is an error naming the file at the first frame.
+    let path = dir.path().join("no-such-folder/view.avi");
+    let mut sink = VideoSink::create(&path, 30.0).expect("create");
+    let err = sink.write(&rgb_frame(64, 48, 0)).expect_err("no folder");
+    assert!(err.to_string().contains("no-such-folder"), "{err}");
+}
+
+/// Photos of three sizes in one folder.
+fn mixed_size_folder(dir: &Path) -> std::path::PathBuf {
+    let images = dir.join("photos");
+    std::fs::create_dir_all(&images).expect("dir");
+    for (k, (w, h)) in [(160, 120), (96, 128), (160, 120)].into_iter().enumerate() {
+        let p = images.join(format!("{k:06}.png"));
+        let m =
+            Mat::new_rows_cols_with_default(h, w, core::CV_8UC3, Scalar::all(90.0)).expect("mat");
+        assert!(
+            imgcodecs::imwrite(p.to_str().expect("utf-8"), &m, &core::Vector::new())
+                .expect("imwrite")
+        );
+    }
+    images
+}
+
+#[test]
+fn image_folder_of_mixed_sizes_gets_intrinsics_per_image() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let images = mixed_size_folder(dir.path());
+    let opts = ImageFolderOptions {
+        hfov_deg: 60.0,
+        ..ImageFolderOptions::default()
+    };
+    let mut src = ImageFolderSource::open(&images, opts).expect("open");
+    assert!(!src.fixed_size());
+    let frames = read_all(&mut src);
+    let sizes: Vec<(u32, u32)> = frames
+        .iter()
+        .map(|f| (f.color.width, f.color.height))
+        .collect();
+    assert_eq!(sizes, [(160, 120), (96, 128), (160, 120)]);
+    for f in &frames {
+        assert_eq!(
+            f.intrinsics,
+            Intrinsics::from_hfov(f.color.width, f.color.height, 60.0)
+        );
+    }
+}
+
+#[test]
+fn image_folder_with_fixed_intrinsics_refuses_a_size_change() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let images = mixed_size_folder(dir.path());
+    // Given intrinsics.
+    let given = Intrinsics::from_hfov(160, 120, 50.0);
+    let opts = ImageFolderOptions {
+        intrinsics: Some(given),
+        ..ImageFolderOptions::default()
+    };
+    let mut src = ImageFolderSource::open(&images, opts).expect("open");
+    assert!(src.fixed_size());
+    assert_eq!(
+        src.next_frame().expect("0").expect("some").intrinsics,
+        given
+    );
+    let err = src.next_frame().expect_err("size change");
+    assert!(matches!(err, AssessError::Source { .. }), "{err:?}");
+    let msg = err.to_string();
+    assert!(
+        msg.contains("000001.png") && msg.contains("96 x 128") && msg.contains("160 x 120"),
+        "{msg}"
+    );
+    // The source moves on; the third image has the first one's size.
+    assert_eq!(
+        src.next_frame().expect("2").expect("some").intrinsics,
+        given
+    );
+
+    // Intrinsics from a depth sequence.
+    let stems: Vec<String> = (0..3).map(|k| format!("{k:06}")).collect();
+    write_depth(&dir.path().join("depth"), &stems, true);
+    let opts = ImageFolderOptions {
+        depth: Some(dir.path().join("depth")),
+        ..ImageFolderOptions::default()
+    };
+    let mut src = ImageFolderSource::open(&images, opts).expect("open");
+    assert!(src.fixed_size());
+    assert_eq!(
+        src.next_frame().expect("0").expect("some").intrinsics.fx,
+        150.0
+    );
+    let msg = src.next_frame().expect_err("size change").to_string();
+    assert!(
+        msg.contains("000001.png") && msg.contains("96 x 128"),
+        "{msg}"
+    );
 }

@@ -1,5 +1,6 @@
 //! OpenCV `VideoCapture` sources: a video file ([`VideoFileSource`], with an optional aligned
-//! depth sequence) and a plain webcam ([`WebcamSource`], colour only).
+//! depth sequence) and a plain webcam ([`WebcamSource`], colour only); and the writing side, an
+//! MJPG `.avi` ([`VideoSink`]).
 //!
 //! # Depth sequences
 //!
@@ -36,6 +37,12 @@
 //! video of which not even the first frame decodes. A video that stops decoding part-way (a
 //! truncated file) ends there, like a complete one: OpenCV cannot tell the two apart. A missing or
 //! undecodable depth PNG is an error naming the PNG. Nothing here panics on bad input.
+//!
+//! # Writing video
+//!
+//! [`VideoSink`] writes RGB images as Motion-JPEG in an AVI container (FourCC `MJPG`, OpenCV's
+//! built-in encoder, so it needs no FFmpeg). The frame rate is given when the sink is created
+//! and the frame size is fixed by the first frame; [`VideoFileSource`] reads the file back.
 
 use std::path::{Path, PathBuf};
 
@@ -45,7 +52,7 @@ use opencv::{imgcodecs, imgproc, videoio};
 use serde::Deserialize;
 
 use super::FrameSource;
-use crate::vision::calib::{RawIntrinsics, rgb_from_mat};
+use crate::vision::calib::{RawIntrinsics, bgr_mat, rgb_from_mat};
 use crate::vision::frame::{CameraFrame, DepthImage, Intrinsics, RgbImage};
 use crate::{AssessError, Result};
 
@@ -58,11 +65,36 @@ pub const DEFAULT_FPS: f64 = 30.0;
 /// Name of the depth sequence's description file.
 pub const DEPTH_TOML: &str = "depth.toml";
 
-fn source_err(source_name: impl Into<String>, message: impl Into<String>) -> AssessError {
+pub(crate) fn source_err(
+    source_name: impl Into<String>,
+    message: impl Into<String>,
+) -> AssessError {
     AssessError::Source {
         source_name: source_name.into(),
         message: message.into(),
     }
+}
+
+/// Decodes the image file `path` with OpenCV's `imread` `flags`; a missing or undecodable file
+/// is an error naming it, with `what` ("image", "depth image") in the message.
+pub(crate) fn read_mat(path: &Path, flags: i32, what: &str) -> Result<Mat> {
+    let name = path.display().to_string();
+    if !path.is_file() {
+        return Err(source_err(&name, format!("no such {what} file")));
+    }
+    let mat = imgcodecs::imread(&name, flags).map_err(|e| source_err(&name, e.message))?;
+    if mat.empty() {
+        return Err(source_err(
+            &name,
+            format!("cannot read or decode the {what}"),
+        ));
+    }
+    Ok(mat)
+}
+
+/// `", depth <folder>"` for a source's description, or nothing without depth.
+pub(crate) fn depth_note(depth: Option<&DepthSequence>) -> String {
+    depth.map_or_else(String::new, |d| format!(", depth {}", d.dir().display()))
 }
 
 /// An [`RgbImage`] from an 8-bit BGR, BGRA or grey `Mat` as OpenCV decodes it.
@@ -225,14 +257,7 @@ impl DepthSequence {
     /// `width` × `height` [px].
     pub fn read(&self, path: &Path, width: u32, height: u32) -> Result<DepthImage> {
         let name = path.display().to_string();
-        if !path.is_file() {
-            return Err(source_err(&name, "depth image missing"));
-        }
-        let mat = imgcodecs::imread(&name, imgcodecs::IMREAD_ANYDEPTH)
-            .map_err(|e| source_err(&name, e.message))?;
-        if mat.empty() {
-            return Err(source_err(&name, "cannot decode the depth image"));
-        }
+        let mat = read_mat(path, imgcodecs::IMREAD_ANYDEPTH, "depth image")?;
         if mat.typ() != core::CV_16UC1 {
             return Err(source_err(
                 &name,
@@ -492,11 +517,12 @@ impl FrameSource for VideoFileSource {
     }
 
     fn describe(&self) -> String {
-        let depth = match &self.depth {
-            Some(d) => format!(", depth {}", d.dir().display()),
-            None => String::new(),
-        };
-        format!("video {} ({:.3} fps{depth})", self.name, self.fps)
+        format!(
+            "video {} ({:.3} fps{})",
+            self.name,
+            self.fps,
+            depth_note(self.depth.as_ref())
+        )
     }
 
     fn has_depth(&self) -> bool {
@@ -590,6 +616,11 @@ impl WebcamSource {
             index: 0,
         })
     }
+
+    /// The frame rate the driver reports (else the requested or default one) [1/s].
+    pub fn fps(&self) -> f64 {
+        self.fps
+    }
 }
 
 impl FrameSource for WebcamSource {
@@ -649,6 +680,128 @@ impl FrameSource for WebcamSource {
 
     fn has_depth(&self) -> bool {
         false
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Writing video.
+
+/// MJPG quality of [`VideoSink`] frames [0, 100] (OpenCV's `VIDEOWRITER_PROP_QUALITY`).
+pub const VIDEO_SINK_QUALITY: f64 = 90.0;
+
+/// Writes RGB images to an MJPG `.avi` (module docs). The file is created at the first frame,
+/// whose size every later frame must have; a sink that was given no frame writes no file.
+#[derive(Debug)]
+pub struct VideoSink {
+    path: PathBuf,
+    name: String,
+    fps: f64,
+    /// The writer and the frame size [px], once the first frame is in.
+    writer: Option<(videoio::VideoWriter, u32, u32)>,
+    frames: u64,
+}
+
+impl VideoSink {
+    /// A sink writing `path` (extension `.avi`, any case) at `fps` [1/s] in (0.1, 1000]. Nothing
+    /// is written before the first frame.
+    pub fn create(path: impl AsRef<Path>, fps: f64) -> Result<Self> {
+        let path = path.as_ref().to_path_buf();
+        let name = path.display().to_string();
+        if !path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("avi"))
+        {
+            return Err(source_err(&name, "an MJPG video must be an .avi file"));
+        }
+        if !valid_fps(fps) {
+            return Err(AssessError::invalid(
+                "fps",
+                format!("must be in (0.1, 1000] (got {fps})"),
+            ));
+        }
+        Ok(Self {
+            path,
+            name,
+            fps,
+            writer: None,
+            frames: 0,
+        })
+    }
+
+    /// Appends one frame (converted RGB → BGR for OpenCV). The first frame fixes the video's
+    /// size; a frame of another size is an error and is not written.
+    pub fn write(&mut self, image: &RgbImage) -> Result<()> {
+        let (w, h) = (image.width, image.height);
+        let writer = match &mut self.writer {
+            Some((writer, w0, h0)) if (*w0, *h0) == (w, h) => writer,
+            Some((_, w0, h0)) => {
+                return Err(source_err(
+                    &self.name,
+                    format!(
+                        "frame {} is {w} x {h} px, the video {w0} x {h0} px",
+                        self.frames
+                    ),
+                ));
+            }
+            None => {
+                let size = core::Size::new(
+                    i32::try_from(w).map_err(|_| source_err(&self.name, "frame too wide"))?,
+                    i32::try_from(h).map_err(|_| source_err(&self.name, "frame too high"))?,
+                );
+                let err = |e: opencv::Error| source_err(&self.name, e.message);
+                let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(err)?;
+                let mut writer = videoio::VideoWriter::new_with_backend(
+                    &self.name,
+                    videoio::CAP_OPENCV_MJPEG,
+                    fourcc,
+                    self.fps,
+                    size,
+                    true,
+                )
+                .map_err(err)?;
+                if !writer.is_opened().map_err(err)? {
+                    return Err(source_err(
+                        &self.name,
+                        "OpenCV cannot create the video (is the folder writable?)",
+                    ));
+                }
+                // A request: a backend without the property keeps its default quality.
+                let _ = writer.set(videoio::VIDEOWRITER_PROP_QUALITY, VIDEO_SINK_QUALITY);
+                &mut self.writer.insert((writer, w, h)).0
+            }
+        };
+        let bgr = bgr_mat(image).map_err(|e| source_err(&self.name, e.to_string()))?;
+        writer
+            .write(&bgr)
+            .map_err(|e| source_err(&self.name, e.message))?;
+        self.frames += 1;
+        Ok(())
+    }
+
+    /// The frame size fixed by the first frame (width, height) [px].
+    pub fn size(&self) -> Option<(u32, u32)> {
+        self.writer.as_ref().map(|(_, w, h)| (*w, *h))
+    }
+
+    /// Frames written so far.
+    pub fn frames(&self) -> u64 {
+        self.frames
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Closes the file (writes the AVI index). Without a frame there is no file.
+    pub fn finish(mut self) -> Result<()> {
+        match self.writer.take() {
+            Some((mut writer, _, _)) => writer
+                .release()
+                .map_err(|e| source_err(&self.name, e.message)),
+            None => Ok(()),
+        }
     }
 }
 

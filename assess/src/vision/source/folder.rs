@@ -4,19 +4,29 @@
 //! `.webp`, any case; subfolders are ignored) in byte-wise file-name order, so name them with
 //! zero-padded numbers. Frame `k` has the timestamp k / fps [s] with the options' nominal fps.
 //! Optional depth: a [`DepthSequence`] folder whose PNG for a frame has the colour file's stem
-//! (`000123.jpg` → `depth/000123.png`). Intrinsics as for video files (see [`super::capture`]).
+//! (`000123.jpg` → `depth/000123.png`).
 //!
-//! An unreadable or undecodable image, a missing depth PNG or a frame whose size differs from
-//! the first is an [`AssessError::Source`] naming the file; frames are never skipped silently.
+//! # Intrinsics and image sizes
+//!
+//! The intrinsics, and with them the image size, are fixed when they are given in the options
+//! or when there is a depth sequence (one camera's aligned recording, whose `depth.toml` may
+//! give them; precedence as for video files, see [`super::capture`]): every image must then have
+//! the first one's size. Otherwise each image gets [`Intrinsics::from_hfov`] for its own size, so
+//! a folder may mix photos of different sizes and cameras (all assumed to have the options'
+//! horizontal field of view).
+//!
+//! An unreadable or undecodable image, a missing depth PNG or, with fixed intrinsics, a frame
+//! whose size differs from the first is an [`AssessError::Source`] naming the file; frames are
+//! never skipped silently.
 
 use std::path::{Path, PathBuf};
 
 use opencv::imgcodecs;
-use opencv::prelude::*;
 
 use super::FrameSource;
 use super::capture::{
-    DEFAULT_FPS, DEFAULT_HFOV_DEG, DepthSequence, frame_intrinsics, rgb_from_decoded,
+    DEFAULT_FPS, DEFAULT_HFOV_DEG, DepthSequence, depth_note, frame_intrinsics, read_mat,
+    resolve_intrinsics, rgb_from_decoded, source_err,
 };
 use crate::vision::frame::{CameraFrame, Intrinsics};
 use crate::{AssessError, Result};
@@ -29,11 +39,13 @@ pub const IMAGE_EXTENSIONS: [&str; 7] = ["png", "jpg", "jpeg", "bmp", "tif", "ti
 pub struct ImageFolderOptions {
     /// Nominal frame rate for timestamps [1/s].
     pub fps: f64,
-    /// Colour intrinsics; default: the depth sequence's, or from `hfov_deg`.
+    /// Colour intrinsics for every image (which must then all have their size); default: the
+    /// depth sequence's, or from `hfov_deg` per image (module docs).
     pub intrinsics: Option<Intrinsics>,
     /// Horizontal field of view for the default intrinsics [deg].
     pub hfov_deg: f64,
-    /// A depth sequence folder with PNGs named after the colour files' stems.
+    /// A depth sequence folder with PNGs named after the colour files' stems; it fixes the
+    /// image size.
     pub depth: Option<PathBuf>,
 }
 
@@ -57,13 +69,6 @@ pub struct ImageFolderSource {
     depth: Option<DepthSequence>,
     intrinsics: Option<Intrinsics>,
     next: usize,
-}
-
-fn source_err(source_name: impl Into<String>, message: impl Into<String>) -> AssessError {
-    AssessError::Source {
-        source_name: source_name.into(),
-        message: message.into(),
-    }
 }
 
 /// Whether the path has one of [`IMAGE_EXTENSIONS`].
@@ -128,6 +133,17 @@ impl ImageFolderSource {
     pub fn files(&self) -> &[PathBuf] {
         &self.files
     }
+
+    /// The nominal frame rate of the timestamps [1/s].
+    pub fn fps(&self) -> f64 {
+        self.options.fps
+    }
+
+    /// Whether every image must have the same size (intrinsics fixed by the options or a depth
+    /// sequence; module docs).
+    pub fn fixed_size(&self) -> bool {
+        self.options.intrinsics.is_some() || self.depth.is_some()
+    }
 }
 
 impl FrameSource for ImageFolderSource {
@@ -140,15 +156,26 @@ impl FrameSource for ImageFolderSource {
         // Advance first: a failing frame is reported once, and the caller may go on.
         self.next += 1;
         let color = crate::vision::RgbImage::read(path)?;
-        let intrinsics = frame_intrinsics(
-            &mut self.intrinsics,
-            &self.dir.display().to_string(),
-            &name,
-            self.options.intrinsics,
-            self.depth.as_ref(),
-            self.options.hfov_deg,
-            (color.width, color.height),
-        )?;
+        let intrinsics = if self.fixed_size() {
+            frame_intrinsics(
+                &mut self.intrinsics,
+                &self.dir.display().to_string(),
+                &name,
+                self.options.intrinsics,
+                self.depth.as_ref(),
+                self.options.hfov_deg,
+                (color.width, color.height),
+            )?
+        } else {
+            resolve_intrinsics(
+                &name,
+                None,
+                None,
+                self.options.hfov_deg,
+                color.width,
+                color.height,
+            )?
+        };
         let depth = match &self.depth {
             Some(seq) => {
                 let stem = path
@@ -171,15 +198,12 @@ impl FrameSource for ImageFolderSource {
     }
 
     fn describe(&self) -> String {
-        let depth = match &self.depth {
-            Some(d) => format!(", depth {}", d.dir().display()),
-            None => String::new(),
-        };
         format!(
-            "image folder {} ({} images at {} fps{depth})",
+            "image folder {} ({} images at {} fps{})",
             self.dir.display(),
             self.files.len(),
-            self.options.fps
+            self.options.fps,
+            depth_note(self.depth.as_ref())
         )
     }
 
@@ -191,14 +215,6 @@ impl FrameSource for ImageFolderSource {
 /// Reads one image file (any format OpenCV decodes) as RGB. Errors name the file.
 pub fn read_image(path: impl AsRef<Path>) -> Result<crate::vision::RgbImage> {
     let path = path.as_ref();
-    let name = path.display().to_string();
-    if !path.is_file() {
-        return Err(source_err(&name, "no such image file"));
-    }
-    let mat = imgcodecs::imread(&name, imgcodecs::IMREAD_COLOR)
-        .map_err(|e| source_err(&name, e.message))?;
-    if mat.empty() {
-        return Err(source_err(&name, "cannot read or decode the image"));
-    }
-    rgb_from_decoded(&mat, &name)
+    let mat = read_mat(path, imgcodecs::IMREAD_COLOR, "image")?;
+    rgb_from_decoded(&mat, &path.display().to_string())
 }
