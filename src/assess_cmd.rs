@@ -89,9 +89,10 @@ pub(crate) struct VisionArgs {
     #[arg(long, value_name = "N")]
     max_frames: Option<u64>,
     /// ALSO WRITE THE CAMERA IMAGE: the monitoring view (landmarks, head ray, workspace areas
-    /// with the confirmed one highlighted, live indicators) as an .avi (PNG frames) or, for a
-    /// path without extension, a folder of PNGs. Without this flag no image is written
-    /// (privacy: only landmarks and cues are kept).
+    /// with the confirmed one highlighted, live indicators) as an MJPG .avi at the source's
+    /// frame rate (one frame size) or, for a path without extension, a folder of PNGs (any
+    /// sizes). Without this flag no image is written (privacy: only landmarks and cues are
+    /// kept).
     #[arg(long, value_name = "PATH")]
     annotate: Option<PathBuf>,
 }
@@ -357,7 +358,7 @@ fn assess_camera(
             Err(_) => (a.clone(), a.clone()),
         });
     let mut sink = match &annotate_path {
-        Some((write_to, _)) => Some(ImageSink::create(write_to, "--annotate")?),
+        Some((write_to, _)) => Some(ImageSink::create(write_to, "--annotate", opened.fps)?),
         None => None,
     };
 
@@ -371,37 +372,41 @@ fn assess_camera(
         (a, b) => a.or(b),
     };
     let progress = progress_bar(len);
-    let mut cues: Vec<CueFrame> = Vec::new();
-    let mut n: u64 = 0;
-    while v.max_frames.is_none_or(|m| n < m) && !stop.load(Ordering::Relaxed) {
-        let Some(frame) = opened
-            .source
-            .next_frame()
-            .with_context(|| format!("reading {described}"))?
-        else {
-            break;
-        };
-        let p = perception.step(&frame)?;
-        landmarks.write(frame.index, frame.t, &p.landmarks)?;
-        cues.push(p.cues.frame);
-        let a = run.push(&p.cues.frame)?;
-        if let Some(sink) = sink.as_mut() {
-            let img = annotate(&frame, &p, perception.extrinsics(), &overlay_ws, a)?;
-            sink.push(&img, frame.t)?;
+    // Everything from here on fails as a whole: the sink is closed (dropped) before the
+    // annotated view of a failed run is removed below.
+    let result = (|| {
+        let mut cues: Vec<CueFrame> = Vec::new();
+        let mut n: u64 = 0;
+        while v.max_frames.is_none_or(|m| n < m) && !stop.load(Ordering::Relaxed) {
+            let Some(frame) = opened
+                .source
+                .next_frame()
+                .with_context(|| format!("reading {described}"))?
+            else {
+                break;
+            };
+            let p = perception.step(&frame)?;
+            landmarks.write(frame.index, frame.t, &p.landmarks)?;
+            cues.push(p.cues.frame);
+            let a = run.push(&p.cues.frame)?;
+            if let Some(sink) = sink.as_mut() {
+                let img = annotate(&frame, &p, perception.extrinsics(), &overlay_ws, a)?;
+                sink.push(&img)?;
+            }
+            n += 1;
+            progress.inc(1);
         }
-        n += 1;
-        progress.inc(1);
-    }
-    landmarks.finish()?;
-    let cues_path = run.staging.path().join(CUES_FILE);
-    assess::io::cue_csv::write(&cues_path, &cues)
-        .with_context(|| format!("cannot write {}", cues_path.display()))?;
-    if let Some(sink) = sink {
-        sink.finish()?;
-    }
-    let mut extra = vec![PathBuf::from(CUES_FILE), PathBuf::from(LANDMARKS_FILE)];
-    extra.extend(annotate_path.map(|(_, shown)| shown));
-    let result = run.finish(args, described, &progress, extra);
+        landmarks.finish()?;
+        let cues_path = run.staging.path().join(CUES_FILE);
+        assess::io::cue_csv::write(&cues_path, &cues)
+            .with_context(|| format!("cannot write {}", cues_path.display()))?;
+        if let Some(sink) = sink {
+            sink.finish()?;
+        }
+        let mut extra = vec![PathBuf::from(CUES_FILE), PathBuf::from(LANDMARKS_FILE)];
+        extra.extend(annotate_path.map(|(_, shown)| shown));
+        run.finish(args, described, &progress, extra)
+    })();
     if result.is_err()
         && let Some(a) = &v.annotate
         && !a.starts_with(&args.out)
@@ -1028,6 +1033,11 @@ mod vision_tests {
         }
     }
 
+    /// The error of a run that must fail, with its causes.
+    fn fails(a: &AssessArgs) -> String {
+        format!("{:#}", assess(a).unwrap_err())
+    }
+
     fn still() -> VisionArgs {
         VisionArgs {
             still: true,
@@ -1182,12 +1192,12 @@ mod vision_tests {
     #[test]
     fn a_generated_avi_is_assessed_with_tracking_and_max_frames() {
         let s = setup();
-        // A 5-frame video of the photo, written with the same AVI writer as --annotate.
+        // A 5-frame video of the photo, written with the same MJPG writer as --annotate.
         let avi = s.dir.path().join("clip.avi");
         let photo = RgbImage::read(&root().join(PHOTO)).unwrap();
-        let mut sink = ImageSink::create(&avi, "test").unwrap();
-        for k in 0..5 {
-            sink.push(&photo, f64::from(k) / 30.0).unwrap();
+        let mut sink = ImageSink::create(&avi, "test", 30.0).unwrap();
+        for _ in 0..5 {
+            sink.push(&photo).unwrap();
         }
         sink.finish().unwrap();
         let out = s.dir.path().join("results");
@@ -1206,15 +1216,72 @@ mod vision_tests {
     }
 
     #[test]
+    fn a_folder_of_photos_of_several_sizes_is_assessed_unless_intrinsics_are_fixed() {
+        let s = setup();
+        let photos = s.dir.path().join("photos");
+        fs::create_dir(&photos).unwrap();
+        fs::copy(root().join(PHOTO), photos.join("a.jpg")).unwrap();
+        fs::copy(
+            root().join("data/images/business-person.png"),
+            photos.join("b.png"),
+        )
+        .unwrap();
+        // Each photo gets intrinsics for its own size; the PNG view keeps each one's size.
+        let out = s.dir.path().join("results");
+        let v = VisionArgs {
+            annotate: Some(s.dir.path().join("view")),
+            ..still()
+        };
+        let report = assess(&args(&photos, &s.workspace, &out, v)).unwrap();
+        assert_eq!(report.frames, 2);
+        let sizes: Vec<(u32, u32)> = ["000000.png", "000001.png"]
+            .iter()
+            .map(|f| {
+                let img = RgbImage::read(&s.dir.path().join("view").join(f)).unwrap();
+                (img.width, img.height)
+            })
+            .collect();
+        assert_eq!(sizes, [(960, 640), (958, 1358)]);
+        let counts = landmark_counts(&out.join(LANDMARKS_FILE));
+        assert_eq!(counts.get(&(1, "pose".to_string())), Some(&33));
+
+        // An .avi holds one size: a clear error, and no video is left behind.
+        let avi = s.dir.path().join("view.avi");
+        let v = VisionArgs {
+            annotate: Some(avi.clone()),
+            ..still()
+        };
+        let e = fails(&args(&photos, &s.workspace, &s.dir.path().join("r2"), v));
+        assert!(e.contains("write a PNG folder"), "{e}");
+        assert!(!avi.exists() && !s.dir.path().join("r2").exists());
+
+        // --intrinsics hold for one camera: the second size is refused.
+        let v = VisionArgs {
+            camera: crate::vision_cmd::CameraArgs {
+                intrinsics: Some(crate::vision_cmd::IntrinsicsArg {
+                    fx: 800.0,
+                    fy: 800.0,
+                    cx: 480.0,
+                    cy: 320.0,
+                }),
+                ..Default::default()
+            },
+            ..still()
+        };
+        let r3 = s.dir.path().join("r3");
+        let e = fails(&args(&photos, &s.workspace, &r3, v));
+        assert!(
+            e.contains("frame 1 is 958 x 1358 px but the first frame was 960 x 640 px"),
+            "{e}"
+        );
+        assert!(!r3.exists());
+    }
+
+    #[test]
     fn bad_camera_inputs_are_clear_errors_and_write_nothing() {
         let s = setup();
         let out = s.dir.path().join("results");
-        let err = |cues: &Path, v: VisionArgs| {
-            format!(
-                "{:#}",
-                assess(&args(cues, &s.workspace, &out, v)).unwrap_err()
-            )
-        };
+        let err = |cues: &Path, v: VisionArgs| fails(&args(cues, &s.workspace, &out, v));
         // Not a video, despite its name.
         let fake = s.dir.path().join("fake.mp4");
         fs::write(&fake, b"not a video").unwrap();
@@ -1279,10 +1346,7 @@ mod vision_tests {
         let bag = s.dir.path().join("foo.bag");
         fs::write(&bag, b"x").unwrap();
         let out = s.dir.path().join("results");
-        let e = format!(
-            "{:#}",
-            assess(&args(&bag, &s.workspace, &out, VisionArgs::default())).unwrap_err()
-        );
+        let e = fails(&args(&bag, &s.workspace, &out, VisionArgs::default()));
         assert!(
             e.contains("RealSense .bag files need the `realsense` feature"),
             "{e}"

@@ -4,12 +4,15 @@
 //! - `--print-board board.png` writes the board (`--board`, default `config/board.toml`) at
 //!   `--dpi` and prints its physical size and the frame it defines.
 //! - `--image board.jpg` or `--camera <source>` gives the colour image(s) of the board lying on
-//!   the table. A source is a video file, an image folder or `webcam:<index>[:<w>x<h>]`. From a
-//!   source, `--skip` frames are dropped (exposure settling), then up to `--frames` frames are
-//!   calibrated and the one with the most corners (then the lowest reprojection RMS) is kept; the
-//!   spread of the others shows how stable the pose is.
-//! - The intrinsics are `--intrinsics fx,fy,cx,cy` [px], else the source's: the depth sequence's
-//!   or a pinhole model with `--hfov-deg` (a guess; the pose is then only as good as it).
+//!   the table. A source is anything `assess --cues` reads frames from, opened the same way
+//!   (`crate::vision_cmd::open_source`): a video file, an image folder, a RealSense `.bag`
+//!   (feature `realsense`), `camera` (a RealSense camera with that feature, else webcam 0) or
+//!   `webcam:N[:WxH]`. From a source, `--skip` frames are dropped (exposure settling), then up
+//!   to `--frames` frames are calibrated and the one with the most corners (then the lowest
+//!   reprojection RMS) is kept; the spread of the others shows how stable the pose is.
+//! - The intrinsics are `--intrinsics fx,fy,cx,cy` [px], else the source's: a RealSense
+//!   camera's or `.bag`'s own, or a pinhole model with `--hfov-deg` (a guess; the pose is then
+//!   only as good as it).
 //! - `--out` (default `extrinsics.toml`, refused if it exists unless `--force`) receives the
 //!   extrinsics with their provenance; `--check check.png` the image with the workspace areas
 //!   (`--workspace`), the board and the axes projected, to check by eye.
@@ -19,12 +22,14 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, bail};
 use assess::Workspace;
 use assess::vision::calib::{self, BoardCalibration, BoardSpec, CalibrationInfo, ExtrinsicsFile};
-use assess::vision::source::capture::{
-    DEFAULT_HFOV_DEG, VideoFileOptions, VideoFileSource, WebcamOptions, WebcamSource,
-};
-use assess::vision::source::folder::{self, ImageFolderOptions, ImageFolderSource};
-use assess::vision::{FrameSource, Intrinsics, RgbImage};
+use assess::vision::source::capture::DEFAULT_HFOV_DEG;
+use assess::vision::source::folder;
+use assess::vision::{Intrinsics, RgbImage};
 use clap::Args;
+
+use crate::vision_cmd::{
+    CameraArgs, CueInput, FixedIntrinsics, IntrinsicsArg, open_source, parse_hfov, parse_intrinsics,
+};
 
 /// Arguments of `hrc-adapt calibrate`.
 #[derive(Debug, Args)]
@@ -32,15 +37,17 @@ pub(crate) struct CalibrateArgs {
     /// A colour image (PNG, JPEG, ...) of the board lying on the table.
     #[arg(long, conflicts_with = "camera")]
     image: Option<PathBuf>,
-    /// A frame source showing the board: a video file, an image folder, or
-    /// `webcam:<index>[:<width>x<height>]`.
+    /// A frame source showing the board: a video file, an image folder, a RealSense .bag
+    /// (feature `realsense`), `camera` (a RealSense camera if built with `realsense` and one is
+    /// connected, else the first webcam) or `webcam:N[:WxH]` (device N, optionally asking for
+    /// a W x H px frame).
     #[arg(long)]
-    camera: Option<String>,
+    camera: Option<PathBuf>,
     /// Colour intrinsics `fx,fy,cx,cy` [px]; default: the source's (see --hfov-deg).
-    #[arg(long, value_parser = parse_intrinsics)]
-    intrinsics: Option<[f64; 4]>,
+    #[arg(long, value_name = "FX,FY,CX,CY", value_parser = parse_intrinsics)]
+    intrinsics: Option<IntrinsicsArg>,
     /// Horizontal field of view [deg] assumed when no intrinsics are known.
-    #[arg(long, default_value_t = DEFAULT_HFOV_DEG)]
+    #[arg(long, value_name = "DEG", default_value_t = DEFAULT_HFOV_DEG, value_parser = parse_hfov)]
     hfov_deg: f64,
     /// The board description.
     #[arg(long, default_value = "config/board.toml")]
@@ -73,64 +80,6 @@ pub(crate) struct CalibrateArgs {
 
 /// White margin around the printed board [m].
 const PRINT_MARGIN_M: f64 = 0.01;
-
-fn parse_intrinsics(s: &str) -> Result<[f64; 4], String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|p| p.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("expected fx,fy,cx,cy in px: {e}"))?;
-    match *v.as_slice() {
-        [fx, fy, cx, cy] if v.iter().all(|x| x.is_finite()) && fx > 0.0 && fy > 0.0 => {
-            Ok([fx, fy, cx, cy])
-        }
-        [_, _, _, _] => Err("fx and fy must be > 0 and all values finite".into()),
-        _ => Err(format!("expected 4 values fx,fy,cx,cy, got {}", v.len())),
-    }
-}
-
-/// A frame source from its command-line spelling (see [`CalibrateArgs::camera`]).
-pub(crate) fn open_source(spec: &str, hfov_deg: f64) -> anyhow::Result<Box<dyn FrameSource>> {
-    if let Some(rest) = spec.strip_prefix("webcam:") {
-        let (index, size) = match rest.split_once(':') {
-            Some((i, size)) => {
-                let (w, h) = size
-                    .split_once('x')
-                    .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
-                    .with_context(|| {
-                        format!("`{spec}`: the size must be <width>x<height>, e.g. 1280x720")
-                    })?;
-                (i, Some((w, h)))
-            }
-            None => (rest, None),
-        };
-        let index: u32 = index
-            .parse()
-            .with_context(|| format!("`{spec}`: the device index must be a number"))?;
-        let options = WebcamOptions {
-            size,
-            hfov_deg,
-            ..WebcamOptions::default()
-        };
-        return Ok(Box::new(WebcamSource::open(index, options)?));
-    }
-    let path = Path::new(spec);
-    if path.is_dir() {
-        let options = ImageFolderOptions {
-            hfov_deg,
-            ..ImageFolderOptions::default()
-        };
-        Ok(Box::new(ImageFolderSource::open(path, options)?))
-    } else if path.is_file() {
-        let options = VideoFileOptions {
-            hfov_deg,
-            ..VideoFileOptions::default()
-        };
-        Ok(Box::new(VideoFileSource::open(path, options)?))
-    } else {
-        bail!("`{spec}` is neither a file, a folder nor webcam:<index>")
-    }
-}
 
 /// What a run produced, for the summary.
 #[derive(Debug)]
@@ -189,17 +138,6 @@ fn print_board(board: &BoardSpec, png: &Path, dpi: f64) -> anyhow::Result<String
     ))
 }
 
-fn explicit_intrinsics(v: Option<[f64; 4]>, image: &RgbImage) -> Option<Intrinsics> {
-    v.map(|[fx, fy, cx, cy]| Intrinsics {
-        width: image.width,
-        height: image.height,
-        fx,
-        fy,
-        cx,
-        cy,
-    })
-}
-
 fn calibrate(args: &CalibrateArgs, board: &BoardSpec) -> anyhow::Result<Outcome> {
     if args.image.is_none() && args.camera.is_none() {
         bail!("nothing to do: pass --image, --camera or --print-board");
@@ -218,7 +156,9 @@ fn calibrate(args: &CalibrateArgs, board: &BoardSpec) -> anyhow::Result<Outcome>
     let (source, frames) = match (&args.image, &args.camera) {
         (Some(path), None) => {
             let image = folder::read_image(path)?;
-            let k = explicit_intrinsics(args.intrinsics, &image);
+            let k = args
+                .intrinsics
+                .map(|k| k.at_size(image.width, image.height));
             let guessed = k.is_none();
             let k = k
                 .unwrap_or_else(|| Intrinsics::from_hfov(image.width, image.height, args.hfov_deg));
@@ -307,8 +247,21 @@ fn calibrate(args: &CalibrateArgs, board: &BoardSpec) -> anyhow::Result<Outcome>
 
 type Frames = (String, Vec<(RgbImage, Intrinsics, bool)>);
 
-fn grab_frames(args: &CalibrateArgs, spec: &str) -> anyhow::Result<Frames> {
-    let mut src = open_source(spec, args.hfov_deg)?;
+fn grab_frames(args: &CalibrateArgs, spec: &Path) -> anyhow::Result<Frames> {
+    let input = CueInput::parse_flag(spec, "--camera")?;
+    if !input.is_camera() {
+        bail!(
+            "--camera {}: a cue file or KTH folder holds no images; expected a video, an image \
+             folder, a RealSense .bag, `camera` or `webcam:N[:WxH]`",
+            spec.display()
+        );
+    }
+    let cam = CameraArgs {
+        hfov: args.hfov_deg,
+        ..CameraArgs::default()
+    };
+    let mut src = open_source(&input, &cam, None)?.source;
+    let mut explicit = args.intrinsics.map(FixedIntrinsics::new);
     let mut frames = Vec::new();
     let mut seen = 0u32;
     while frames.len() < args.frames as usize {
@@ -319,9 +272,14 @@ fn grab_frames(args: &CalibrateArgs, spec: &str) -> anyhow::Result<Frames> {
         if seen <= args.skip {
             continue;
         }
-        let explicit = explicit_intrinsics(args.intrinsics, &frame.color);
-        let guessed = explicit.is_none() && !src.has_depth();
-        let k = explicit.unwrap_or(frame.intrinsics);
+        let (k, guessed) = match explicit.as_mut() {
+            Some(fixed) => (
+                fixed.at(frame.index, frame.color.width, frame.color.height)?,
+                false,
+            ),
+            // Colour-only sources guess theirs from --hfov-deg; RealSense ones carry their own.
+            None => (frame.intrinsics, !src.has_depth()),
+        };
         frames.push((frame.color, k, guessed));
     }
     if frames.is_empty() {
@@ -414,14 +372,50 @@ mod tests {
     }
 
     #[test]
-    fn intrinsics_argument_is_parsed_and_checked() {
+    fn the_command_line_takes_the_shared_camera_spellings() {
+        #[derive(Debug, clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            args: CalibrateArgs,
+        }
+        let parse = |extra: &[&str]| {
+            let argv = ["calibrate"].iter().chain(extra).copied();
+            <Cli as clap::Parser>::try_parse_from(argv).map(|c| c.args)
+        };
+        let a = parse(&[
+            "--camera",
+            "webcam:1:1280x720",
+            "--intrinsics",
+            "910, 905.5,640,360",
+            "--hfov-deg",
+            "60",
+        ])
+        .expect("parses");
         assert_eq!(
-            parse_intrinsics("910, 905.5,640,360").expect("ok"),
-            [910.0, 905.5, 640.0, 360.0]
+            a.intrinsics,
+            Some(IntrinsicsArg {
+                fx: 910.0,
+                fy: 905.5,
+                cx: 640.0,
+                cy: 360.0
+            })
         );
-        assert!(parse_intrinsics("910,905,640").is_err());
-        assert!(parse_intrinsics("0,905,640,360").is_err());
-        assert!(parse_intrinsics("a,b,c,d").is_err());
+        assert_eq!(a.hfov_deg, 60.0);
+        let camera = a.camera.expect("camera");
+        assert_eq!(
+            CueInput::parse_flag(&camera, "--camera").expect("webcam"),
+            CueInput::Webcam {
+                device: 1,
+                size: Some((1280, 720))
+            }
+        );
+        for bad in [
+            ["--intrinsics", "910,905,640"],
+            ["--intrinsics", "0,905,640,360"],
+            ["--hfov-deg", "180"],
+        ] {
+            assert!(parse(&bad).is_err(), "{bad:?}");
+        }
     }
 
     #[test]
@@ -462,14 +456,14 @@ mod tests {
         let blank = RgbImage::black(o.intrinsics.width, o.intrinsics.height);
         calib::write_png(&blank, frames.join("000002.png")).expect("blank");
         let mut a = args(dir.path());
-        a.camera = Some(frames.to_string_lossy().into_owned());
+        a.camera = Some(frames.clone());
         a.force = true;
-        a.intrinsics = Some([
-            o.intrinsics.fx,
-            o.intrinsics.fy,
-            o.intrinsics.cx,
-            o.intrinsics.cy,
-        ]);
+        a.intrinsics = Some(IntrinsicsArg {
+            fx: o.intrinsics.fx,
+            fy: o.intrinsics.fy,
+            cx: o.intrinsics.cx,
+            cy: o.intrinsics.cy,
+        });
         let o2 = calibrate(&a, &board).expect("folder");
         assert_eq!((o2.tried, o2.succeeded), (3, 2));
         assert!(o2.spread_m < 1e-9);
@@ -479,28 +473,32 @@ mod tests {
     #[test]
     fn a_board_less_image_fails_clearly() {
         let dir = tempfile::tempdir().expect("tempdir");
+        let fails = |a: &CalibrateArgs| {
+            let e = calibrate(a, &BoardSpec::default()).expect_err("must fail");
+            assert!(!a.out.exists());
+            format!("{e:#}")
+        };
         let path = dir.path().join("blank.png");
         calib::write_png(&RgbImage::black(320, 240), &path).expect("png");
         let mut a = args(dir.path());
         a.image = Some(path);
-        let err = calibrate(&a, &BoardSpec::default())
-            .expect_err("no board")
-            .to_string();
+        let err = fails(&a);
         assert!(err.contains("no DICT_4X4_50 marker found"), "{err}");
-        assert!(!a.out.exists());
         let mut a = args(dir.path());
         a.camera = Some("webcam:x".into());
-        let err = calibrate(&a, &BoardSpec::default())
-            .expect_err("bad spec")
-            .to_string();
-        assert!(err.contains("device index"), "{err}");
-        let mut a = args(dir.path());
-        a.camera = Some(
-            dir.path()
-                .join("nothing-here")
-                .to_string_lossy()
-                .into_owned(),
+        let err = fails(&a);
+        assert!(
+            err.starts_with("--camera webcam:x: expected webcam:N"),
+            "{err}"
         );
-        assert!(calibrate(&a, &BoardSpec::default()).is_err());
+        a.camera = Some(dir.path().join("nothing-here"));
+        let err = fails(&a);
+        assert!(err.starts_with("cannot read --camera"), "{err}");
+        // A cue file has no images.
+        let csv = dir.path().join("cues.csv");
+        std::fs::write(&csv, "t\n").expect("csv");
+        a.camera = Some(csv);
+        let err = fails(&a);
+        assert!(err.contains("holds no images"), "{err}");
     }
 }

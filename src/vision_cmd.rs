@@ -1,6 +1,7 @@
 //! Binary-side camera plumbing shared by `hrc-adapt assess --cues <video | images | .bag |
-//! camera | webcam:N>` and `hrc-adapt trial --cues camera`: what a `--cues` argument names, the
-//! camera options, and (feature `vision`) opening the frame source, the perception stack
+//! camera | webcam:N>`, `hrc-adapt trial --cues camera` and `hrc-adapt calibrate --camera`: what
+//! a `--cues` / `--camera` argument names, the camera options, and (feature `vision`) opening the
+//! frame source, the perception stack
 //! (landmarks → cues), the privacy-preserving outputs (`landmarks.csv`) and the opt-in image
 //! outputs (annotated monitoring view, stored video).
 //!
@@ -35,29 +36,42 @@ pub(crate) enum CueInput {
     Bag(PathBuf),
     /// `camera`: a RealSense camera if one is found (feature `realsense`), else webcam 0.
     Camera,
-    /// `webcam:N`: the N-th webcam (`/dev/videoN`).
-    Webcam(u32),
+    /// `webcam:N[:WxH]`: the N-th webcam (`/dev/videoN`), optionally asking the driver for a
+    /// frame size.
+    Webcam {
+        /// Device number (`/dev/videoN`).
+        device: u32,
+        /// Requested frame size (width, height) [px]; the driver may pick another.
+        size: Option<(u32, u32)>,
+    },
 }
 
 impl CueInput {
-    /// Classifies a `--cues` argument. `camera` and `webcam:N` are keywords; a path is
+    /// Classifies a `--cues` argument. `camera` and `webcam:N[:WxH]` are keywords; a path is
     /// classified by its extension (files) or contents (folders: images, else KTH).
     pub(crate) fn parse(arg: &Path) -> anyhow::Result<Self> {
+        Self::parse_flag(arg, "--cues")
+    }
+
+    /// [`Self::parse`] for the command-line flag `flag` (named in the errors).
+    pub(crate) fn parse_flag(arg: &Path, flag: &str) -> anyhow::Result<Self> {
         if let Some(s) = arg.to_str() {
             if s == "camera" {
                 return Ok(Self::Camera);
             }
-            if let Some(n) = s.strip_prefix("webcam:") {
-                let n = n.parse::<u32>().map_err(|_| {
-                    anyhow::anyhow!(
-                        "--cues {s}: expected webcam:N with N a device number (webcam:0)"
-                    )
-                })?;
-                return Ok(Self::Webcam(n));
+            if let Some(rest) = s.strip_prefix("webcam:") {
+                return parse_webcam(rest)
+                    .ok_or_else(|| {
+                        anyhow::anyhow!(
+                            "{flag} {s}: expected webcam:N[:WxH] with N a device number and an \
+                             optional frame size in px (webcam:0, webcam:1:1280x720)"
+                        )
+                    })
+                    .map(|(device, size)| Self::Webcam { device, size });
             }
         }
         let meta =
-            fs::metadata(arg).with_context(|| format!("cannot read the cues {}", arg.display()))?;
+            fs::metadata(arg).with_context(|| format!("cannot read {flag} {}", arg.display()))?;
         if meta.is_dir() {
             return Ok(if folder_has_images(arg)? {
                 Self::Images(arg.to_path_buf())
@@ -75,9 +89,9 @@ impl CueInput {
             "bag" => Self::Bag(arg.to_path_buf()),
             e if VIDEO_EXTENSIONS.contains(&e) => Self::Video(arg.to_path_buf()),
             _ => bail!(
-                "--cues {}: unsupported input; expected a cue CSV (.csv), a KTH handover folder, \
+                "{flag} {}: unsupported input; expected a cue CSV (.csv), a KTH handover folder, \
                  a video (.mp4 .avi .mkv .mov), an image folder, a RealSense .bag, `camera` or \
-                 `webcam:N`",
+                 `webcam:N[:WxH]`",
                 arg.display()
             ),
         })
@@ -91,7 +105,7 @@ impl CueInput {
     /// Whether the source is live (never ends by itself).
     #[cfg_attr(not(feature = "vision"), allow(dead_code))]
     pub(crate) fn is_live(&self) -> bool {
-        matches!(self, Self::Camera | Self::Webcam(_))
+        matches!(self, Self::Camera | Self::Webcam { .. })
     }
 
     /// The input's file or folder, if it has one.
@@ -100,9 +114,25 @@ impl CueInput {
             Self::CueCsv(p) | Self::Kth(p) | Self::Video(p) | Self::Images(p) | Self::Bag(p) => {
                 Some(p)
             }
-            Self::Camera | Self::Webcam(_) => None,
+            Self::Camera | Self::Webcam { .. } => None,
         }
     }
+}
+
+/// `N` or `N:WxH` (after `webcam:`): the device number and the optional frame size [px].
+fn parse_webcam(s: &str) -> Option<(u32, Option<(u32, u32)>)> {
+    let (device, size) = match s.split_once(':') {
+        Some((device, size)) => {
+            let (w, h) = size.split_once('x')?;
+            let (w, h) = (w.parse::<u32>().ok()?, h.parse::<u32>().ok()?);
+            if w == 0 || h == 0 {
+                return None;
+            }
+            (device, Some((w, h)))
+        }
+        None => (s, None),
+    };
+    Some((device.parse().ok()?, size))
 }
 
 /// Whether a folder holds at least one image file (subfolders are not looked into).
@@ -157,7 +187,7 @@ pub(crate) fn parse_intrinsics(s: &str) -> Result<IntrinsicsArg, String> {
 }
 
 /// Parses a horizontal field of view [deg] in (0, 180).
-fn parse_hfov(s: &str) -> Result<f64, String> {
+pub(crate) fn parse_hfov(s: &str) -> Result<f64, String> {
     let v: f64 = s
         .parse()
         .map_err(|_| format!("expected an angle in degrees, got `{s}`"))?;
@@ -180,7 +210,8 @@ pub(crate) struct CameraArgs {
     #[arg(long, value_name = "TOML")]
     pub(crate) extrinsics: Option<PathBuf>,
     /// Colour intrinsics `fx,fy,cx,cy` [px] for video files, image folders and webcams
-    /// (RealSense cameras and .bag files carry their own). Default: from --hfov.
+    /// (RealSense cameras and .bag files carry their own); every frame must then have the first
+    /// one's size. Default: from --hfov, for each frame's own size.
     #[arg(long, value_name = "FX,FY,CX,CY", value_parser = parse_intrinsics)]
     pub(crate) intrinsics: Option<IntrinsicsArg>,
     /// Horizontal field of view [deg] for the default intrinsics (the D435i colour camera: 69).
@@ -221,14 +252,14 @@ pub(crate) use camera::*;
 mod camera {
     use std::fmt::Write as _;
     use std::fs::File;
-    use std::io::{BufWriter, Seek, SeekFrom, Write};
+    use std::io::{BufWriter, Write};
     use std::path::{Path, PathBuf};
 
     use anyhow::{Context as _, bail};
     use assess::vision::cues::{CueConfig, CueExtractor, PerceivedCues, load_canonical_face};
     use assess::vision::pipeline::{Mode, Pipeline, PipelineConfig, Variant};
     use assess::vision::source::capture::{
-        VideoFileOptions, VideoFileSource, WebcamOptions, WebcamSource,
+        VideoFileOptions, VideoFileSource, VideoSink, WebcamOptions, WebcamSource,
     };
     use assess::vision::source::folder::{ImageFolderOptions, ImageFolderSource};
     use assess::vision::{
@@ -238,9 +269,42 @@ mod camera {
 
     use super::{CameraArgs, CueInput, IntrinsicsArg};
 
+    /// `--intrinsics` applied to the frames of one source: they hold for one camera, so the
+    /// first frame fixes the size and a frame of another size is an error.
+    #[derive(Debug, Clone, Copy)]
+    pub(crate) struct FixedIntrinsics {
+        arg: IntrinsicsArg,
+        /// The first frame's size (width, height) [px].
+        size: Option<(u32, u32)>,
+    }
+
+    impl FixedIntrinsics {
+        /// Nothing seen yet.
+        pub(crate) fn new(arg: IntrinsicsArg) -> Self {
+            Self { arg, size: None }
+        }
+
+        /// The intrinsics of frame `index`, an image of `width` × `height` [px].
+        pub(crate) fn at(
+            &mut self,
+            index: u64,
+            width: u32,
+            height: u32,
+        ) -> anyhow::Result<Intrinsics> {
+            match *self.size.get_or_insert((width, height)) {
+                (w, h) if (w, h) == (width, height) => Ok(self.arg.at_size(width, height)),
+                (w, h) => bail!(
+                    "frame {index} is {width} x {height} px but the first frame was {w} x {h} px: \
+                     --intrinsics hold for one camera (without it, each image of a folder gets \
+                     intrinsics from --hfov for its own size)"
+                ),
+            }
+        }
+    }
+
     impl IntrinsicsArg {
         /// As [`Intrinsics`] of a `width` × `height` image [px].
-        fn at_size(self, width: u32, height: u32) -> Intrinsics {
+        pub(crate) fn at_size(self, width: u32, height: u32) -> Intrinsics {
             Intrinsics {
                 width,
                 height,
@@ -252,12 +316,16 @@ mod camera {
         }
     }
 
-    /// An opened frame source and, when known, how many frames it holds.
+    /// An opened frame source, its nominal frame rate and, when known, how many frames it
+    /// holds.
     pub(crate) struct Opened {
         /// The source.
         pub(crate) source: Box<dyn FrameSource>,
         /// The number of frames, for recordings that know it.
         pub(crate) len: Option<u64>,
+        /// The source's nominal frame rate [1/s] (the container's, the folder's, the
+        /// driver's); the rate of a video written from its frames.
+        pub(crate) fps: f64,
     }
 
     impl std::fmt::Debug for Opened {
@@ -265,6 +333,7 @@ mod camera {
             f.debug_struct("Opened")
                 .field("source", &self.source.describe())
                 .field("len", &self.len)
+                .field("fps", &self.fps)
                 .finish()
         }
     }
@@ -276,9 +345,10 @@ mod camera {
         cam: &CameraArgs,
         depth: Option<&Path>,
     ) -> anyhow::Result<Opened> {
-        // Intrinsics given on the command line are checked against the first frame's size by
-        // the sources; the size is not known here, so it is filled in from the frame later
-        // (see `Perception::step`) and only fx, fy, cx, cy matter.
+        // Intrinsics given on the command line are not passed to the sources: the frame size
+        // is not known here, so they are applied per frame by the caller ([`FixedIntrinsics`],
+        // which refuses a size change); the sources give their own (a RealSense's, a depth.toml's,
+        // else from the hfov for each frame's size).
         if depth.is_some() && !matches!(input, CueInput::Video(_) | CueInput::Images(_)) {
             bail!("--depth applies to a video file or an image folder only");
         }
@@ -296,10 +366,11 @@ mod camera {
                         depth: depth.map(Path::to_path_buf),
                     },
                 )?;
-                let len = source.frame_count();
+                let (len, fps) = (source.frame_count(), source.fps());
                 Opened {
                     source: Box::new(source),
                     len,
+                    fps,
                 }
             }
             CueInput::Images(p) => {
@@ -311,31 +382,35 @@ mod camera {
                         ..ImageFolderOptions::default()
                     },
                 )?;
-                let len = Some(source.files().len() as u64);
+                let (len, fps) = (Some(source.files().len() as u64), source.fps());
                 Opened {
                     source: Box::new(source),
                     len,
+                    fps,
                 }
             }
             CueInput::Bag(p) => open_bag(p)?,
             CueInput::Camera => open_camera(cam)?,
-            CueInput::Webcam(n) => Opened {
-                source: Box::new(open_webcam(*n, cam)?),
-                len: None,
-            },
+            CueInput::Webcam { device, size } => open_webcam(*device, *size, cam)?,
         };
         Ok(opened)
     }
 
-    fn open_webcam(n: u32, cam: &CameraArgs) -> anyhow::Result<WebcamSource> {
-        WebcamSource::open(
+    fn open_webcam(n: u32, size: Option<(u32, u32)>, cam: &CameraArgs) -> anyhow::Result<Opened> {
+        let source = WebcamSource::open(
             n,
             WebcamOptions {
+                size,
                 hfov_deg: cam.hfov,
                 ..WebcamOptions::default()
             },
         )
-        .with_context(|| format!("cannot open webcam {n} (/dev/video{n})"))
+        .with_context(|| format!("cannot open webcam {n} (/dev/video{n})"))?;
+        Ok(Opened {
+            fps: source.fps(),
+            source: Box::new(source),
+            len: None,
+        })
     }
 
     #[cfg(feature = "realsense")]
@@ -344,6 +419,7 @@ mod camera {
         Ok(Opened {
             source: Box::new(RealSenseSource::open_bag(p)?),
             len: None,
+            fps: assess::vision::source::capture::DEFAULT_FPS,
         })
     }
 
@@ -367,10 +443,12 @@ mod camera {
             };
             match list_devices() {
                 Ok(devices) if !devices.is_empty() => {
-                    let source = RealSenseSource::open_camera(&RealSenseConfig::default())?;
+                    let config = RealSenseConfig::default();
+                    let source = RealSenseSource::open_camera(&config)?;
                     return Ok(Opened {
                         source: Box::new(source),
                         len: None,
+                        fps: f64::from(config.fps),
                     });
                 }
                 Ok(_) => "no RealSense device is connected".to_string(),
@@ -380,11 +458,8 @@ mod camera {
         #[cfg(not(feature = "realsense"))]
         let realsense_note =
             "RealSense cameras need the `realsense` feature, which this build lacks".to_string();
-        match open_webcam(0, cam) {
-            Ok(source) => Ok(Opened {
-                source: Box::new(source),
-                len: None,
-            }),
+        match open_webcam(0, None, cam) {
+            Ok(opened) => Ok(opened),
             Err(e) => bail!(
                 "no camera found: {realsense_note}, and webcam 0 cannot be opened ({e:#}); \
                  connect a camera, or pass a recording to --cues"
@@ -427,7 +502,7 @@ mod camera {
     pub(crate) struct Perception {
         pipeline: Pipeline,
         extractor: CueExtractor,
-        intrinsics: Option<IntrinsicsArg>,
+        intrinsics: Option<FixedIntrinsics>,
     }
 
     /// One frame's perception result.
@@ -459,15 +534,17 @@ mod camera {
             Ok(Self {
                 pipeline,
                 extractor,
-                intrinsics,
+                intrinsics: intrinsics.map(FixedIntrinsics::new),
             })
         }
 
-        /// Landmarks and cues of one frame (cue time = camera time).
+        /// Landmarks and cues of one frame (cue time = camera time). With `--intrinsics`, a
+        /// frame whose size differs from the first is an error.
         pub(crate) fn step(&mut self, frame: &CameraFrame) -> anyhow::Result<Perceived> {
-            let intrinsics = self.intrinsics.map_or(frame.intrinsics, |i| {
-                i.at_size(frame.color.width, frame.color.height)
-            });
+            let intrinsics = match &mut self.intrinsics {
+                Some(fixed) => fixed.at(frame.index, frame.color.width, frame.color.height)?,
+                None => frame.intrinsics,
+            };
             let landmarks = self
                 .pipeline
                 .process(&frame.color, frame.depth.as_ref())
@@ -572,8 +649,9 @@ mod camera {
         }
     }
 
-    /// Where camera images go when the user asked for them: an `.avi` video or, for a path
-    /// without extension, a folder of numbered PNGs (`000000.png`, ...).
+    /// Where camera images go when the user asked for them: an MJPG `.avi` video
+    /// ([`VideoSink`]) or, for a path without extension, a folder of numbered PNGs
+    /// (`000000.png`, ...). A video needs every frame at one size; a PNG folder does not.
     #[derive(Debug)]
     pub(crate) enum ImageSink {
         /// A PNG folder.
@@ -583,14 +661,15 @@ mod camera {
             /// Frames written.
             n: u64,
         },
-        /// An AVI file.
-        Avi(AviWriter),
+        /// An MJPG `.avi` file.
+        Avi(VideoSink),
     }
 
     impl ImageSink {
-        /// Creates the sink for `path`: `.avi` → video, no extension → PNG folder (created;
-        /// it must not exist or be empty); other extensions are refused.
-        pub(crate) fn create(path: &Path, flag: &str) -> anyhow::Result<Self> {
+        /// Creates the sink for `path`: `.avi` → video at `fps` [1/s] (the source's nominal
+        /// rate), no extension → PNG folder (created; it must not exist or be empty); other
+        /// extensions are refused. `flag` names the option in the errors.
+        pub(crate) fn create(path: &Path, flag: &str, fps: f64) -> anyhow::Result<Self> {
             match path.extension().and_then(|e| e.to_str()) {
                 None => {
                     if path.exists()
@@ -615,7 +694,10 @@ mod camera {
                     if path.exists() {
                         bail!("{flag} {}: the file exists", path.display());
                     }
-                    Ok(Self::Avi(AviWriter::create(path)?))
+                    Ok(Self::Avi(
+                        VideoSink::create(path, fps)
+                            .with_context(|| format!("{flag} {}", path.display()))?,
+                    ))
                 }
                 Some(_) => bail!(
                     "{flag} {}: expected an .avi file, or a path without extension for a PNG \
@@ -625,8 +707,8 @@ mod camera {
             }
         }
 
-        /// Appends one image at camera time `t` [s].
-        pub(crate) fn push(&mut self, image: &RgbImage, t: f64) -> anyhow::Result<()> {
+        /// Appends one image.
+        pub(crate) fn push(&mut self, image: &RgbImage) -> anyhow::Result<()> {
             match self {
                 Self::Pngs { dir, n } => {
                     let p = dir.join(format!("{:06}.png", *n));
@@ -635,207 +717,29 @@ mod camera {
                     *n += 1;
                     Ok(())
                 }
-                Self::Avi(w) => w.push(image, t),
+                Self::Avi(v) => {
+                    if v.size().is_some_and(|s| s != (image.width, image.height)) {
+                        bail!(
+                            "{}: a video holds frames of one size, and this one is {} x {} px; \
+                             for images of several sizes write a PNG folder (a path without \
+                             extension)",
+                            v.path().display(),
+                            image.width,
+                            image.height
+                        );
+                    }
+                    Ok(v.write(image)?)
+                }
             }
         }
 
-        /// Closes the sink (writes the AVI index).
+        /// Closes the sink (a video's index is written here).
         pub(crate) fn finish(self) -> anyhow::Result<()> {
             match self {
                 Self::Pngs { .. } => Ok(()),
-                Self::Avi(w) => w.finish(),
+                Self::Avi(v) => Ok(v.finish()?),
             }
         }
-    }
-
-    /// A minimal AVI 1.0 writer (RIFF `AVI `, one video stream, `idx1` index) whose frames are
-    /// PNG-compressed (FourCC `MPNG`, which FFmpeg, OpenCV's FFmpeg backend, VLC and mpv play).
-    /// The frame rate in the header is the mean rate of the camera timestamps.
-    #[derive(Debug)]
-    pub(crate) struct AviWriter {
-        path: PathBuf,
-        out: BufWriter<File>,
-        size: Option<(u32, u32)>,
-        /// (offset from the `movi` FourCC, size) of each frame chunk.
-        index: Vec<(u32, u32)>,
-        max_chunk: u32,
-        first_t: f64,
-        last_t: f64,
-    }
-
-    /// Length of the RIFF and `hdrl` headers [bytes]; the `movi` list starts there.
-    const AVI_HEADER_LEN: u64 = 12 + 8 + 4 + (8 + 56) + 8 + 4 + (8 + 56) + (8 + 40);
-
-    impl AviWriter {
-        fn create(path: &Path) -> anyhow::Result<Self> {
-            let file =
-                File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
-            Ok(Self {
-                path: path.to_path_buf(),
-                out: BufWriter::new(file),
-                size: None,
-                index: Vec::new(),
-                max_chunk: 0,
-                first_t: 0.0,
-                last_t: 0.0,
-            })
-        }
-
-        fn io<T>(&self, r: std::io::Result<T>) -> anyhow::Result<T> {
-            r.with_context(|| format!("cannot write {}", self.path.display()))
-        }
-
-        /// Writes the headers (placeholder sizes) and opens the `movi` list.
-        fn start(&mut self, w: u32, h: u32) -> anyhow::Result<()> {
-            let header = avi_header(w, h, 0, 30.0, 0, 0);
-            let r = self.out.write_all(&header);
-            self.io(r)?;
-            // LIST <size, patched at the end> movi
-            let r = self.out.write_all(b"LIST\0\0\0\0movi");
-            self.io(r)?;
-            self.size = Some((w, h));
-            Ok(())
-        }
-
-        fn push(&mut self, image: &RgbImage, t: f64) -> anyhow::Result<()> {
-            match self.size {
-                None => {
-                    self.start(image.width, image.height)?;
-                    self.first_t = t;
-                }
-                Some(s) if s != (image.width, image.height) => bail!(
-                    "{}: frame of {}×{} px in a {}×{} px video",
-                    self.path.display(),
-                    image.width,
-                    image.height,
-                    s.0,
-                    s.1
-                ),
-                Some(_) => {}
-            }
-            self.last_t = t;
-            let png = assess::vision::calib::encode_png(image)?;
-            let len = u32::try_from(png.len()).context("a PNG frame over 4 GiB")?;
-            let offset = self.index.last().map_or(4, |(o, s)| o + 8 + s + (s & 1));
-            self.index.push((offset, len));
-            self.max_chunk = self.max_chunk.max(len);
-            let mut chunk = Vec::with_capacity(png.len() + 9);
-            chunk.extend_from_slice(b"00dc");
-            chunk.extend_from_slice(&len.to_le_bytes());
-            chunk.extend_from_slice(&png);
-            if len & 1 == 1 {
-                chunk.push(0);
-            }
-            let r = self.out.write_all(&chunk);
-            self.io(r)
-        }
-
-        fn finish(mut self) -> anyhow::Result<()> {
-            let Some((w, h)) = self.size else {
-                // No frame: an empty file says nothing; remove it.
-                drop(self.out);
-                let _ = std::fs::remove_file(&self.path);
-                return Ok(());
-            };
-            let n = self.index.len() as u32;
-            let movi_len = self.index.last().map_or(4, |(o, s)| o + 8 + s + (s & 1));
-            let mut idx = Vec::with_capacity(8 + 16 * self.index.len());
-            idx.extend_from_slice(b"idx1");
-            idx.extend_from_slice(&(16 * n).to_le_bytes());
-            for (offset, size) in &self.index {
-                idx.extend_from_slice(b"00dc");
-                idx.extend_from_slice(&0x10u32.to_le_bytes()); // AVIIF_KEYFRAME
-                idx.extend_from_slice(&offset.to_le_bytes());
-                idx.extend_from_slice(&size.to_le_bytes());
-            }
-            let r = self.out.write_all(&idx);
-            self.io(r)?;
-            let fps = if n > 1 && self.last_t > self.first_t {
-                f64::from(n - 1) / (self.last_t - self.first_t)
-            } else {
-                30.0
-            };
-            let riff_len = (AVI_HEADER_LEN - 8) + 8 + u64::from(movi_len) + idx.len() as u64;
-            let riff_len = u32::try_from(riff_len).context("AVI over 4 GiB")?;
-            let header = avi_header(w, h, n, fps, self.max_chunk, riff_len);
-            let r = self.out.seek(SeekFrom::Start(0));
-            self.io(r)?;
-            let r = self.out.write_all(&header);
-            self.io(r)?;
-            let r = self.out.seek(SeekFrom::Start(AVI_HEADER_LEN + 4));
-            self.io(r)?;
-            let r = self.out.write_all(&movi_len.to_le_bytes());
-            self.io(r)?;
-            let r = self.out.flush();
-            self.io(r)?;
-            Ok(())
-        }
-    }
-
-    /// `RIFF AVI ` + `hdrl` (avih, strl(strh, strf)) for one `MPNG` video stream of `n` frames
-    /// of `w` × `h` px at `fps` [1/s].
-    fn avi_header(w: u32, h: u32, n: u32, fps: f64, max_chunk: u32, riff_len: u32) -> Vec<u8> {
-        let mut b = Vec::with_capacity(AVI_HEADER_LEN as usize);
-        let u32le = |b: &mut Vec<u8>, v: u32| b.extend_from_slice(&v.to_le_bytes());
-        let rate = (fps * 1000.0).round().clamp(1.0, f64::from(u32::MAX)) as u32;
-        b.extend_from_slice(b"RIFF");
-        u32le(&mut b, riff_len);
-        b.extend_from_slice(b"AVI ");
-        b.extend_from_slice(b"LIST");
-        u32le(&mut b, 4 + (8 + 56) + 8 + 4 + (8 + 56) + (8 + 40));
-        b.extend_from_slice(b"hdrl");
-        b.extend_from_slice(b"avih");
-        u32le(&mut b, 56);
-        u32le(&mut b, (1e6 / fps).round() as u32); // dwMicroSecPerFrame
-        u32le(
-            &mut b,
-            (f64::from(max_chunk) * fps).min(f64::from(u32::MAX)) as u32,
-        ); // dwMaxBytesPerSec
-        u32le(&mut b, 0); // dwPaddingGranularity
-        u32le(&mut b, 0x10); // dwFlags: AVIF_HASINDEX
-        u32le(&mut b, n); // dwTotalFrames
-        u32le(&mut b, 0); // dwInitialFrames
-        u32le(&mut b, 1); // dwStreams
-        u32le(&mut b, max_chunk); // dwSuggestedBufferSize
-        u32le(&mut b, w);
-        u32le(&mut b, h);
-        for _ in 0..4 {
-            u32le(&mut b, 0);
-        }
-        b.extend_from_slice(b"LIST");
-        u32le(&mut b, 4 + (8 + 56) + (8 + 40));
-        b.extend_from_slice(b"strl");
-        b.extend_from_slice(b"strh");
-        u32le(&mut b, 56);
-        b.extend_from_slice(b"vids");
-        b.extend_from_slice(b"MPNG");
-        u32le(&mut b, 0); // dwFlags
-        u32le(&mut b, 0); // wPriority, wLanguage
-        u32le(&mut b, 0); // dwInitialFrames
-        u32le(&mut b, 1000); // dwScale
-        u32le(&mut b, rate); // dwRate: rate / scale = fps
-        u32le(&mut b, 0); // dwStart
-        u32le(&mut b, n); // dwLength
-        u32le(&mut b, max_chunk); // dwSuggestedBufferSize
-        u32le(&mut b, u32::MAX); // dwQuality: default
-        u32le(&mut b, 0); // dwSampleSize
-        b.extend_from_slice(&0u16.to_le_bytes()); // rcFrame
-        b.extend_from_slice(&0u16.to_le_bytes());
-        b.extend_from_slice(&(w.min(u32::from(u16::MAX)) as u16).to_le_bytes());
-        b.extend_from_slice(&(h.min(u32::from(u16::MAX)) as u16).to_le_bytes());
-        b.extend_from_slice(b"strf");
-        u32le(&mut b, 40);
-        u32le(&mut b, 40); // biSize
-        u32le(&mut b, w); // biWidth
-        u32le(&mut b, h); // biHeight
-        b.extend_from_slice(&1u16.to_le_bytes()); // biPlanes
-        b.extend_from_slice(&24u16.to_le_bytes()); // biBitCount
-        b.extend_from_slice(b"MPNG"); // biCompression
-        u32le(&mut b, w * h * 3); // biSizeImage
-        for _ in 0..4 {
-            u32le(&mut b, 0);
-        }
-        b
     }
 
     /// Draws the monitoring view on a copy of the frame: landmarks, the workspace areas
@@ -903,12 +807,35 @@ mod tests {
         );
         assert_eq!(
             CueInput::parse(Path::new("webcam:2")).unwrap(),
-            CueInput::Webcam(2)
+            CueInput::Webcam {
+                device: 2,
+                size: None
+            }
         );
-        let e = CueInput::parse(Path::new("webcam:x"))
+        assert_eq!(
+            CueInput::parse(Path::new("webcam:1:1280x720")).unwrap(),
+            CueInput::Webcam {
+                device: 1,
+                size: Some((1280, 720))
+            }
+        );
+        for bad in [
+            "webcam:x",
+            "webcam:",
+            "webcam:1:1280",
+            "webcam:1:0x720",
+            "webcam:1:axb",
+        ] {
+            let e = CueInput::parse(Path::new(bad)).unwrap_err().to_string();
+            assert!(
+                e.starts_with(&format!("--cues {bad}: expected webcam:N")),
+                "{e}"
+            );
+        }
+        let e = CueInput::parse_flag(Path::new("webcam:x"), "--camera")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("expected webcam:N"), "{e}");
+        assert!(e.starts_with("--camera webcam:x: expected"), "{e}");
         for (name, want) in [
             ("c.csv", CueInput::CueCsv(d.join("c.csv"))),
             ("r.MP4", CueInput::Video(d.join("r.MP4"))),
@@ -928,7 +855,7 @@ mod tests {
         let e = CueInput::parse(&d.join("missing.mp4")).unwrap_err();
         assert!(
             format!("{e:#}").starts_with(&format!(
-                "cannot read the cues {}",
+                "cannot read --cues {}",
                 d.join("missing.mp4").display()
             )),
             "{e:#}"
@@ -943,6 +870,24 @@ mod tests {
         assert_eq!(CueInput::parse(&kth).unwrap(), CueInput::Kth(kth));
         assert!(CueInput::Camera.is_live() && CueInput::Camera.is_camera());
         assert!(!CueInput::CueCsv(d.join("c.csv")).is_camera());
+    }
+
+    #[cfg(feature = "vision")]
+    #[test]
+    fn fixed_intrinsics_take_the_frame_size_and_refuse_another() {
+        let arg = parse_intrinsics("600,610,320,240").unwrap();
+        let mut fixed = FixedIntrinsics::new(arg);
+        let k = fixed.at(0, 640, 480).unwrap();
+        assert_eq!(
+            (k.width, k.height, k.fx, k.fy, k.cx, k.cy),
+            (640, 480, 600.0, 610.0, 320.0, 240.0)
+        );
+        assert_eq!(fixed.at(1, 640, 480).unwrap(), k);
+        let e = fixed.at(2, 320, 240).unwrap_err().to_string();
+        assert!(
+            e.starts_with("frame 2 is 320 x 240 px but the first frame was 640 x 480 px"),
+            "{e}"
+        );
     }
 
     #[test]

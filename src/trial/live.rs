@@ -231,7 +231,7 @@ fn perceive(
     )?;
     let mut landmarks = LandmarkCsv::create(landmarks_path)?;
     let mut video = match &spec.store_video {
-        Some(p) => Some(ImageSink::create(p, "--store-video")?),
+        Some(p) => Some(ImageSink::create(p, "--store-video", opened.fps)?),
         None => None,
     };
     let mut seq = 0;
@@ -245,7 +245,7 @@ fn perceive(
         };
         let grabbed = Instant::now();
         if let Some(v) = video.as_mut() {
-            v.push(&frame.color, frame.t)?;
+            v.push(&frame.color)?;
         }
         let p = perception.step(&frame)?;
         landmarks.write(frame.index, frame.t, &p.landmarks)?;
@@ -478,7 +478,10 @@ mod tests {
             &spec(5.0),
             &RobotChoice::Sim,
             &CueSource::Camera(CameraSpec {
-                input: CueInput::Webcam(57),
+                input: CueInput::Webcam {
+                    device: 57,
+                    size: None,
+                },
                 camera: CameraArgs::default(),
                 store_video: None,
             }),
