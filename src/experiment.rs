@@ -32,7 +32,7 @@ use policies::{Condition, ExperimentDesign, PolicyKind, Schedule, SplitMix64};
 use serde::Deserialize;
 
 use crate::trial::config::TrialConfig;
-use crate::trial::{TrialSpec, run_simulated};
+use crate::trial::{CueSource, TrialSpec, run_simulated};
 
 /// Arguments of `hrc-adapt experiment`.
 #[derive(Debug, Args)]
@@ -54,9 +54,18 @@ pub(crate) struct ExperimentArgs {
     /// `sim` (in-process, for a rehearsal) or a UR5e's address.
     #[arg(long, requires = "participant")]
     robot: Option<String>,
-    /// Real session with `--robot emulator`: controller cycles per 2 ms of wall time.
-    #[arg(long, default_value_t = 4, requires = "participant")]
-    speedup: u32,
+    /// Real session with `--robot emulator`: controller cycles per 2 ms of wall time
+    /// (default 4; a live camera needs 1, its default then).
+    #[arg(long, requires = "participant")]
+    speedup: Option<u32>,
+    /// Real session: take each trial's cues from a live camera (`camera`: a RealSense with
+    /// feature `realsense`, else the first webcam; or `webcam:N`) instead of the simulated
+    /// operator. Each trial folder then holds cues and landmarks, no images.
+    #[arg(long, requires = "participant", value_name = "camera|webcam:N")]
+    cues: Option<PathBuf>,
+    /// Live camera options (with `--cues`).
+    #[command(flatten)]
+    camera: crate::vision_cmd::CameraArgs,
 }
 
 /// The experiment file (every key is documented in `config/experiment-ab.toml`).
@@ -346,19 +355,19 @@ pub(crate) fn participant_trials(
 /// `hrc-adapt experiment --participant P03 --robot …`: the guided real session of one
 /// participant into `<out-root>/<timestamp>-session-P03/` ([`session`]).
 fn run_real_session(args: &ExperimentArgs, participant: &str) -> anyhow::Result<()> {
-    use crate::trial::runtime::{self, RobotChoice};
+    use crate::trial::runtime;
     let cfg = ExperimentConfig::from_file(&args.config)?;
     let trial_config = TrialConfig::from_file(&cfg.trial_config)?;
     let trials = participant_trials(&cfg, participant)
         .with_context(|| format!("{}", args.config.display()))?;
     let robot_name = args.robot.clone().unwrap_or_else(|| "emulator".into());
-    let robot = match robot_name.as_str() {
-        "sim" => RobotChoice::Sim,
-        "emulator" => RobotChoice::Emulator {
-            speedup: args.speedup,
-        },
-        host => RobotChoice::Ur(host.to_owned()),
-    };
+    let cues = crate::trial::cue_source(args.cues.as_deref(), &args.camera, None)?;
+    anyhow::ensure!(
+        matches!(cues, CueSource::Simulated | CueSource::Camera(_)),
+        "--cues in a session takes `camera` or `webcam:N` (a live camera), not a recorded file"
+    );
+    let live = matches!(cues, CueSource::Camera(_));
+    let robot = crate::trial::robot_choice(&robot_name, args.speedup, live)?;
     let dir = args.out_root.join(format!(
         "{}-session-{participant}",
         crate::trial::wall_stamp()
@@ -395,7 +404,7 @@ fn run_real_session(args: &ExperimentArgs, participant: &str) -> anyhow::Result<
             config: trial_config.clone(),
         };
         let bar = runtime::progress_bar(show);
-        let result = runtime::run_trial_with(&spec, &robot, out, &stop, &mut |l| {
+        let result = runtime::run_trial_with_cues(&spec, &robot, &cues, out, &stop, &mut |l| {
             runtime::update_bar(&bar, l)
         });
         bar.finish_and_clear();

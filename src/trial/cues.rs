@@ -34,7 +34,7 @@ pub(crate) enum CueSource {
 /// A live cue source: the camera, how to read it, whether to store its video.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct CameraSpec {
-    /// The frame source (`Camera`, `Webcam(n)`; the tests use an image folder).
+    /// The frame source (`Camera`, `Webcam { device, size }`; the tests use an image folder).
     pub(crate) input: crate::vision_cmd::CueInput,
     /// Extrinsics, intrinsics, model variant.
     pub(crate) camera: crate::vision_cmd::CameraArgs,

@@ -33,6 +33,7 @@ use clap::Args;
 use policies::PolicyKind;
 
 #[allow(unused_imports)] // for the experiment runner
+pub(crate) use cues::CueSource;
 pub(crate) use runtime::{TrialSpec, run_simulated};
 
 /// Arguments of `hrc-adapt trial`.
@@ -72,7 +73,7 @@ pub(crate) struct TrialArgs {
     /// Live camera options (with `--cues camera` or `webcam:N`).
     #[command(flatten)]
     camera: crate::vision_cmd::CameraArgs,
-    /// With a live camera: ALSO STORE THE RAW CAMERA IMAGES here (an .avi with PNG frames, or
+    /// With a live camera: ALSO STORE THE RAW CAMERA IMAGES here (an MJPG .avi, or
     /// a folder of PNGs for a path without extension). Without it no image is stored.
     #[arg(long, value_name = "PATH")]
     store_video: Option<PathBuf>,
@@ -94,28 +95,13 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
         seed: args.seed,
         config,
     };
-    let cues = cue_source(&args)?;
+    let cues = cue_source(
+        args.cues.as_deref(),
+        &args.camera,
+        args.store_video.as_deref(),
+    )?;
     let live = matches!(cues, cues::CueSource::Camera(_));
-    let robot = match args.robot.as_str() {
-        "sim" if live => anyhow::bail!(
-            "--robot sim runs on a mock clock as fast as the CPU allows, which a live camera \
-             cannot follow; use --robot emulator (real time with a camera) or a UR5e"
-        ),
-        "sim" => runtime::RobotChoice::Sim,
-        "emulator" => {
-            let speedup = match (args.speedup, live) {
-                (Some(s), true) if s != 1 => anyhow::bail!(
-                    "--speedup {s}: a live camera runs in real time, so the emulator must too \
-                     (--speedup 1, the default with a camera)"
-                ),
-                (Some(s), _) => s,
-                (None, true) => 1,
-                (None, false) => 4,
-            };
-            runtime::RobotChoice::Emulator { speedup }
-        }
-        host => runtime::RobotChoice::Ur(host.to_owned()),
-    };
+    let robot = robot_choice(&args.robot, args.speedup, live)?;
     // The wall clock is used only for the folder name.
     let stamp = wall_stamp();
     let dir = args.out_root.join(format!(
@@ -170,12 +156,46 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The robot from `--robot` and `--speedup`: `sim`, `emulator` or a UR5e's address. A live
+/// camera needs real time: no `sim` (mock clock) and an emulator at speed-up 1 (its default
+/// then; 4 otherwise).
+pub(crate) fn robot_choice(
+    robot: &str,
+    speedup: Option<u32>,
+    live: bool,
+) -> anyhow::Result<runtime::RobotChoice> {
+    Ok(match robot {
+        "sim" if live => anyhow::bail!(
+            "--robot sim runs on a mock clock as fast as the CPU allows, which a live camera \
+             cannot follow; use --robot emulator (real time with a camera) or a UR5e"
+        ),
+        "sim" => runtime::RobotChoice::Sim,
+        "emulator" => {
+            let speedup = match (speedup, live) {
+                (Some(s), true) if s != 1 => anyhow::bail!(
+                    "--speedup {s}: a live camera runs in real time, so the emulator must too \
+                     (--speedup 1, the default with a camera)"
+                ),
+                (Some(s), _) => s,
+                (None, true) => 1,
+                (None, false) => 4,
+            };
+            runtime::RobotChoice::Emulator { speedup }
+        }
+        host => runtime::RobotChoice::Ur(host.to_owned()),
+    })
+}
+
 /// The trial's cue source from `--cues`: none → simulated operator; `camera` / `webcam:N` →
 /// live camera; anything else → a recorded cue CSV. Camera options without a camera are
 /// refused.
-fn cue_source(args: &TrialArgs) -> anyhow::Result<cues::CueSource> {
+pub(crate) fn cue_source(
+    cues: Option<&std::path::Path>,
+    camera: &crate::vision_cmd::CameraArgs,
+    store_video: Option<&std::path::Path>,
+) -> anyhow::Result<cues::CueSource> {
     use crate::vision_cmd::CueInput;
-    let input = match &args.cues {
+    let input = match cues {
         None => None,
         Some(p) => match p.to_str() {
             Some(s) if s == "camera" || s.starts_with("webcam:") => Some(CueInput::parse(p)?),
@@ -183,12 +203,12 @@ fn cue_source(args: &TrialArgs) -> anyhow::Result<cues::CueSource> {
         },
     };
     let Some(input) = input else {
-        let c = &args.camera;
+        let c = camera;
         let given: Vec<&str> = [
             (c.extrinsics.is_some(), "--extrinsics"),
             (c.intrinsics.is_some(), "--intrinsics"),
             (c.lite, "--lite"),
-            (args.store_video.is_some(), "--store-video"),
+            (store_video.is_some(), "--store-video"),
         ]
         .into_iter()
         .filter_map(|(given, name)| given.then_some(name))
@@ -199,15 +219,14 @@ fn cue_source(args: &TrialArgs) -> anyhow::Result<cues::CueSource> {
             given.join(", "),
             if given.len() == 1 { "s" } else { "" }
         );
-        return Ok(args
-            .cues
-            .clone()
-            .map_or(cues::CueSource::Simulated, cues::CueSource::Recorded));
+        return Ok(cues.map_or(cues::CueSource::Simulated, |p| {
+            cues::CueSource::Recorded(p.to_path_buf())
+        }));
     };
     Ok(cues::CueSource::Camera(cues::CameraSpec {
         input,
-        camera: args.camera.clone(),
-        store_video: args.store_video.clone(),
+        camera: camera.clone(),
+        store_video: store_video.map(std::path::Path::to_path_buf),
     }))
 }
 
@@ -255,4 +274,61 @@ fn utc_now() -> (i64, i64, i64, u64, u64, u64) {
     let m = if mp < 10 { mp + 3 } else { mp - 9 };
     let y = yoe + era * 400 + i64::from(m <= 2);
     (y, m, d, rem / 3600, rem % 3600 / 60, rem % 60)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vision_cmd::CameraArgs;
+    use std::path::Path;
+
+    #[test]
+    fn a_live_camera_needs_real_time() {
+        // Without a camera: sim, and the emulator at 4 by default.
+        assert!(matches!(
+            robot_choice("sim", None, false).unwrap(),
+            runtime::RobotChoice::Sim
+        ));
+        assert!(matches!(
+            robot_choice("emulator", None, false).unwrap(),
+            runtime::RobotChoice::Emulator { speedup: 4 }
+        ));
+        // With one: the emulator at 1 by default, other speed-ups and sim refused.
+        assert!(matches!(
+            robot_choice("emulator", None, true).unwrap(),
+            runtime::RobotChoice::Emulator { speedup: 1 }
+        ));
+        let e = robot_choice("emulator", Some(4), true)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("--speedup 4"), "{e}");
+        let e = robot_choice("sim", None, true).unwrap_err().to_string();
+        assert!(e.contains("mock clock"), "{e}");
+        assert!(matches!(
+            robot_choice("192.168.1.10", None, true).unwrap(),
+            runtime::RobotChoice::Ur(h) if h == "192.168.1.10"
+        ));
+    }
+
+    #[test]
+    fn cue_sources_from_the_command_line() {
+        let cam = CameraArgs::default();
+        assert_eq!(
+            cue_source(None, &cam, None).unwrap(),
+            cues::CueSource::Simulated
+        );
+        assert_eq!(
+            cue_source(Some(Path::new("run.csv")), &cam, None).unwrap(),
+            cues::CueSource::Recorded("run.csv".into())
+        );
+        assert!(matches!(
+            cue_source(Some(Path::new("webcam:2")), &cam, None).unwrap(),
+            cues::CueSource::Camera(_)
+        ));
+        // Camera options without a camera are refused, naming them.
+        let e = cue_source(None, &cam, Some(Path::new("v.avi")))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("--store-video"), "{e}");
+    }
 }
