@@ -260,8 +260,11 @@ fn grab_frames(args: &CalibrateArgs, spec: &Path) -> anyhow::Result<Frames> {
         hfov: args.hfov_deg,
         ..CameraArgs::default()
     };
-    let mut src = open_source(&input, &cam, None)?.source;
-    let mut explicit = args.intrinsics.map(FixedIntrinsics::new);
+    let opened = open_source(&input, &cam, None)?;
+    let mut explicit = opened
+        .intrinsics_override(args.intrinsics)?
+        .map(FixedIntrinsics::new);
+    let mut src = opened.source;
     let mut frames = Vec::new();
     let mut seen = 0u32;
     while frames.len() < args.frames as usize {

@@ -326,6 +326,25 @@ mod camera {
         /// The source's nominal frame rate [1/s] (the container's, the folder's, the
         /// driver's); the rate of a video written from its frames.
         pub(crate) fps: f64,
+        /// Whether the source carries its own calibrated intrinsics (RealSense cameras and
+        /// `.bag` files), which `--intrinsics` must not override.
+        pub(crate) own_intrinsics: bool,
+    }
+
+    impl Opened {
+        /// `--intrinsics` for this source: refused where the source carries its own.
+        pub(crate) fn intrinsics_override(
+            &self,
+            arg: Option<IntrinsicsArg>,
+        ) -> anyhow::Result<Option<IntrinsicsArg>> {
+            if arg.is_some() && self.own_intrinsics {
+                bail!(
+                    "--intrinsics: {} carries its own calibrated intrinsics; drop the flag",
+                    self.source.describe()
+                );
+            }
+            Ok(arg)
+        }
     }
 
     impl std::fmt::Debug for Opened {
@@ -334,6 +353,7 @@ mod camera {
                 .field("source", &self.source.describe())
                 .field("len", &self.len)
                 .field("fps", &self.fps)
+                .field("own_intrinsics", &self.own_intrinsics)
                 .finish()
         }
     }
@@ -371,6 +391,7 @@ mod camera {
                     source: Box::new(source),
                     len,
                     fps,
+                    own_intrinsics: false,
                 }
             }
             CueInput::Images(p) => {
@@ -387,6 +408,7 @@ mod camera {
                     source: Box::new(source),
                     len,
                     fps,
+                    own_intrinsics: false,
                 }
             }
             CueInput::Bag(p) => open_bag(p)?,
@@ -410,6 +432,7 @@ mod camera {
             fps: source.fps(),
             source: Box::new(source),
             len: None,
+            own_intrinsics: false,
         })
     }
 
@@ -420,6 +443,7 @@ mod camera {
             source: Box::new(RealSenseSource::open_bag(p)?),
             len: None,
             fps: assess::vision::source::capture::DEFAULT_FPS,
+            own_intrinsics: true,
         })
     }
 
@@ -449,6 +473,7 @@ mod camera {
                         source: Box::new(source),
                         len: None,
                         fps: f64::from(config.fps),
+                        own_intrinsics: true,
                     });
                 }
                 Ok(_) => "no RealSense device is connected".to_string(),
@@ -870,6 +895,23 @@ mod tests {
         assert_eq!(CueInput::parse(&kth).unwrap(), CueInput::Kth(kth));
         assert!(CueInput::Camera.is_live() && CueInput::Camera.is_camera());
         assert!(!CueInput::CueCsv(d.join("c.csv")).is_camera());
+    }
+
+    /// RealSense recordings carry their own calibration: `--intrinsics` is refused for them.
+    #[cfg(feature = "realsense")]
+    #[test]
+    fn intrinsics_cannot_override_a_bags_own() {
+        let bag = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("data/bag/synthetic_plane.bag");
+        let opened = open_source(&CueInput::Bag(bag), &CameraArgs::default(), None).unwrap();
+        assert!(opened.own_intrinsics);
+        let arg = parse_intrinsics("600,610,320,240").unwrap();
+        let e = opened
+            .intrinsics_override(Some(arg))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("its own calibrated intrinsics"), "{e}");
+        assert!(opened.intrinsics_override(None).unwrap().is_none());
     }
 
     #[cfg(feature = "vision")]

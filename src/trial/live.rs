@@ -227,7 +227,7 @@ fn perceive(
     let mut perception = Perception::load(
         pipeline_config(&spec.camera, false),
         extrinsics,
-        spec.camera.intrinsics,
+        opened.intrinsics_override(spec.camera.intrinsics)?,
     )?;
     let mut landmarks = LandmarkCsv::create(landmarks_path)?;
     let mut video = match &spec.store_video {
