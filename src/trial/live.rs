@@ -272,12 +272,10 @@ mod tests {
     use std::sync::atomic::AtomicBool;
 
     use super::*;
-    use crate::trial::config::TrialConfig;
     use crate::trial::cues::CueSource;
     use crate::trial::operator::Level;
     use crate::trial::runtime::{RobotChoice, TrialSpec, run_trial_with_cues};
     use crate::vision_cmd::{CameraArgs, CueInput};
-    use policies::PolicyKind;
 
     /// A stand-in camera: an image folder of `n` copies of the bundled photo (an
     /// `ImageFolderSource`, through the same `open_source` as a real camera). There is no
@@ -293,15 +291,7 @@ mod tests {
     }
 
     fn spec(max_s: f64) -> TrialSpec {
-        let mut config = TrialConfig::shipped().unwrap();
-        config.max_duration_s = max_s;
-        TrialSpec {
-            participant: "P01".into(),
-            condition: Level::L1,
-            policy: PolicyKind::Adaptive,
-            seed: 1,
-            config,
-        }
+        crate::trial::runtime::test_spec(Level::L1, 1, max_s)
     }
 
     fn camera(images: PathBuf, store_video: Option<PathBuf>) -> CueSource {

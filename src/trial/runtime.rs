@@ -770,20 +770,26 @@ pub(crate) fn update_bar(bar: &indicatif::ProgressBar, l: &Live) {
     bar.tick();
 }
 
+/// A test trial: P01, adaptive, the shipped configuration cut to `max_s` [s].
+#[cfg(test)]
+pub(crate) fn test_spec(condition: Level, seed: u64, max_s: f64) -> TrialSpec {
+    let mut config = TrialConfig::shipped().unwrap();
+    config.max_duration_s = max_s;
+    TrialSpec {
+        participant: "P01".into(),
+        condition,
+        policy: PolicyKind::Adaptive,
+        seed,
+        config,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn spec(seed: u64, max_s: f64) -> TrialSpec {
-        let mut config = TrialConfig::shipped().unwrap();
-        config.max_duration_s = max_s;
-        TrialSpec {
-            participant: "P01".into(),
-            condition: Level::L2,
-            policy: PolicyKind::Adaptive,
-            seed,
-            config,
-        }
+        test_spec(Level::L2, seed, max_s)
     }
 
     /// Every file a trial leaves (ARCHITECTURE.md, "Files a trial leaves").
