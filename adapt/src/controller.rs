@@ -498,6 +498,14 @@ impl Controller {
         &self.stats
     }
 
+    /// Tells the controller that its last command was not executed as sent (the safety
+    /// supervisor reduced it or replaced it by a stop): the next step re-synchronises the
+    /// trajectory to the measured joints instead of continuing a plan the robot did not
+    /// follow (which would imply an acceleration jump at the next command).
+    pub fn command_overridden(&mut self) {
+        self.synced = false;
+    }
+
     /// One 2 ms cycle at time `now_s` [s] (injected; a non-finite value advances the last time
     /// by one cycle): read `state`, run task → trajectory → speed scaling, write `out`.
     /// Allocates nothing, never panics.

@@ -644,6 +644,16 @@ fn drive<R: Robot>(
         world.perception_age_s = (t - last_cue_t).max(0.0);
         world.collaborating = controller.collaborating();
         let verdict = supervisor.step(&cmd, &world);
+        // A command the supervisor changed was not executed as planned: the controller
+        // re-plans from the measured joints (a reduction by rounding alone does not count).
+        let overridden = match &verdict {
+            Verdict::Passed => false,
+            Verdict::Reduced { scale, .. } => *scale < 1.0 - 1e-6,
+            Verdict::Stopped { .. } | Verdict::Halted { .. } => true,
+        };
+        if overridden {
+            controller.command_overridden();
+        }
         let pair = (
             verdict_kind(&verdict),
             verdict.requirement().map_or("none", |r| r.id()),
@@ -954,5 +964,28 @@ mod tests {
             std::fs::read(da.join("indicators.csv")).unwrap(),
             std::fs::read(dc.join("indicators.csv")).unwrap()
         );
+    }
+
+    /// The controller plans under the supervisor's joint speed, acceleration and TCP limits
+    /// (SAF-REQ-003/004/005) and re-plans after any command the supervisor changed, so in a
+    /// whole simulated trial the supervisor intervenes only for the human's separation
+    /// (SAF-REQ-007). (Planning exactly at the limits, with no re-plan after a stop, gave
+    /// 232 SAF-REQ-004 events in this trial.)
+    #[test]
+    fn the_supervisor_never_corrects_the_plan_in_a_simulated_trial() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = run_simulated(&test_spec(Level::L2, 1, 240.0), dir.path(), false).unwrap();
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+        assert_eq!(summary["finish_reason"], "completed");
+        let by = summary["safety_events"]["by_requirement"]
+            .as_object()
+            .unwrap();
+        for (requirement, n) in by {
+            assert_eq!(
+                requirement, "SAF-REQ-007",
+                "{n} {requirement} events: {by:?}"
+            );
+        }
     }
 }
