@@ -381,16 +381,11 @@ mod tests {
             &mut |_| {},
         )
         .unwrap();
-        for f in [
-            "trial.mcap",
-            "indicators.csv",
-            "robot.csv",
-            "summary.json",
-            "report.html",
-            LANDMARKS_FILE,
-        ] {
-            assert!(out.join(f).is_file(), "{f} missing");
-        }
+        crate::trial::runtime::assert_trial_files(&out);
+        assert!(
+            out.join(LANDMARKS_FILE).is_file(),
+            "{LANDMARKS_FILE} missing"
+        );
         let summary: serde_json::Value =
             serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
         let source = summary["meta"]["cue_source"].as_str().unwrap();

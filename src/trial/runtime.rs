@@ -780,6 +780,20 @@ pub(crate) fn update_bar(bar: &indicatif::ProgressBar, l: &Live) {
     bar.tick();
 }
 
+/// Asserts every file a trial leaves (ARCHITECTURE.md, "Files a trial leaves").
+#[cfg(test)]
+pub(crate) fn assert_trial_files(out: &Path) {
+    for f in [
+        "trial.mcap",
+        "indicators.csv",
+        "robot.csv",
+        "summary.json",
+        "report.html",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+}
+
 /// A test trial: P01, adaptive, the shipped configuration cut to `max_s` [s].
 #[cfg(test)]
 pub(crate) fn test_spec(condition: Level, seed: u64, max_s: f64) -> TrialSpec {
@@ -800,19 +814,6 @@ mod tests {
 
     fn spec(seed: u64, max_s: f64) -> TrialSpec {
         test_spec(Level::L2, seed, max_s)
-    }
-
-    /// Every file a trial leaves (ARCHITECTURE.md, "Files a trial leaves").
-    fn assert_trial_files(out: &Path) {
-        for f in [
-            "trial.mcap",
-            "indicators.csv",
-            "robot.csv",
-            "summary.json",
-            "report.html",
-        ] {
-            assert!(out.join(f).is_file(), "{f} missing");
-        }
     }
 
     #[test]
