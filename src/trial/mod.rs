@@ -223,6 +223,14 @@ pub(crate) fn cue_source(
             cues::CueSource::Recorded(p.to_path_buf())
         }));
     };
+    // The operator's positions drive the robot's separation monitoring (SAF-REQ-007 and the
+    // QP's separation limits): without extrinsics they would be in the camera frame.
+    anyhow::ensure!(
+        camera.extrinsics.is_some(),
+        "a live camera in a trial needs --extrinsics (from `hrc-adapt calibrate`): the \
+         operator's head and hand positions drive the robot's separation monitoring, and \
+         without extrinsics they would be in the camera frame, not the workspace frame"
+    );
     Ok(cues::CueSource::Camera(cues::CameraSpec {
         input,
         camera: camera.clone(),
@@ -321,8 +329,17 @@ mod tests {
             cue_source(Some(Path::new("run.csv")), &cam, None).unwrap(),
             cues::CueSource::Recorded("run.csv".into())
         );
+        // A live camera needs the extrinsics: its positions drive separation monitoring.
+        let e = cue_source(Some(Path::new("webcam:2")), &cam, None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("needs --extrinsics"), "{e}");
+        let calibrated = CameraArgs {
+            extrinsics: Some("extrinsics.toml".into()),
+            ..CameraArgs::default()
+        };
         assert!(matches!(
-            cue_source(Some(Path::new("webcam:2")), &cam, None).unwrap(),
+            cue_source(Some(Path::new("webcam:2")), &calibrated, None).unwrap(),
             cues::CueSource::Camera(_)
         ));
         // Camera options without a camera are refused, naming them.
