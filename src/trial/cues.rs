@@ -40,6 +40,9 @@ pub(crate) struct CameraSpec {
     pub(crate) camera: crate::vision_cmd::CameraArgs,
     /// Store the raw camera images here (`.avi` or a PNG folder); `None`: never (privacy).
     pub(crate) store_video: Option<PathBuf>,
+    /// Refuse a source without depth (set for a real robot: 2-D-only positions, estimated from
+    /// assumed body sizes, are too rough for separation monitoring).
+    pub(crate) require_depth: bool,
 }
 
 /// A recorded cue file being replayed.

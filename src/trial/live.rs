@@ -221,6 +221,14 @@ fn perceive(
     described: &std::sync::mpsc::SyncSender<String>,
 ) -> anyhow::Result<()> {
     let mut opened = open_source(&spec.input, &spec.camera, None)?;
+    if spec.require_depth && !opened.source.has_depth() {
+        bail!(
+            "{} has no depth: with a real robot the operator's positions drive separation \
+             monitoring, and 2-D-only positions (estimated from assumed body sizes) are too \
+             rough for it; use a RealSense camera",
+            opened.source.describe()
+        );
+    }
     let extrinsics = load_extrinsics(&spec.camera)?;
     let name = opened.source.describe();
     let _ = described.try_send(name.clone());
@@ -299,7 +307,30 @@ mod tests {
             input: CueInput::Images(images),
             camera: CameraArgs::default(),
             store_video,
+            require_depth: false,
         })
+    }
+
+    /// A camera without depth is refused for a real robot before anything moves: its
+    /// 2-D-only positions are too rough for separation monitoring. (The address is never
+    /// contacted: perception starts, and fails, first.)
+    #[test]
+    fn a_camera_without_depth_is_refused_for_a_real_robot() {
+        let dir = tempfile::tempdir().unwrap();
+        let images = fake_camera(dir.path(), 1);
+        let stop = AtomicBool::new(false);
+        let e = run_trial_with_cues(
+            &spec(5.0),
+            &RobotChoice::Ur("192.0.2.1".into()),
+            &camera(images, None),
+            &dir.path().join("run"),
+            &stop,
+            &mut |_| {},
+        )
+        .unwrap_err();
+        let e = format!("{e:#}");
+        assert!(e.contains("has no depth"), "{e}");
+        assert!(!dir.path().join("run").exists());
     }
 
     /// The image and video files and folders in `dir` other than the trial's own plots
@@ -469,6 +500,7 @@ mod tests {
                 },
                 camera: CameraArgs::default(),
                 store_video: None,
+                require_depth: false,
             }),
             &dir.path().join("run"),
             &stop,

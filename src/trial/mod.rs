@@ -235,6 +235,7 @@ pub(crate) fn cue_source(
         input,
         camera: camera.clone(),
         store_video: store_video.map(std::path::Path::to_path_buf),
+        require_depth: false,
     }))
 }
 

@@ -25,7 +25,7 @@ use robot_io::{JointCommand, Robot, RobotState};
 use safety::{Supervisor, SupervisorConfig, Verdict, WorldView};
 
 use super::config::TrialConfig;
-use super::cues::{CueSource, RecordedCues};
+use super::cues::{CameraSpec, CueSource, RecordedCues};
 use super::events::TrialEvent;
 #[cfg(feature = "vision")]
 use super::live::LiveCues;
@@ -255,7 +255,13 @@ pub(crate) fn run_trial_with_cues(
     };
     let live = match cues {
         #[cfg(feature = "vision")]
-        CueSource::Camera(spec) => Some(LiveCues::start(spec, out_dir)?),
+        CueSource::Camera(spec) => {
+            let spec = CameraSpec {
+                require_depth: spec.require_depth || matches!(robot, RobotChoice::Ur(_)),
+                ..spec.clone()
+            };
+            Some(LiveCues::start(&spec, out_dir)?)
+        }
         #[cfg(not(feature = "vision"))]
         CueSource::Camera(spec) => return Err(crate::vision_cmd::vision_missing(&spec.input)),
         CueSource::Simulated | CueSource::Recorded(_) => None,
