@@ -25,7 +25,7 @@ use robot_io::{JointCommand, Robot, RobotState};
 use safety::{Supervisor, SupervisorConfig, Verdict, WorldView};
 
 use super::config::TrialConfig;
-use super::cues::{CameraSpec, CueSource, RecordedCues};
+use super::cues::{CueSource, RecordedCues};
 use super::events::TrialEvent;
 #[cfg(feature = "vision")]
 use super::live::LiveCues;
@@ -256,7 +256,7 @@ pub(crate) fn run_trial_with_cues(
     let live = match cues {
         #[cfg(feature = "vision")]
         CueSource::Camera(spec) => {
-            let spec = CameraSpec {
+            let spec = super::cues::CameraSpec {
                 require_depth: spec.require_depth || matches!(robot, RobotChoice::Ur(_)),
                 ..spec.clone()
             };
