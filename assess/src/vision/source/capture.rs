@@ -417,8 +417,15 @@ impl VideoFileSource {
                 format!("must be in (0.1, 1000] (got {f})"),
             ));
         }
-        let cap = videoio::VideoCapture::from_file(&name, videoio::CAP_ANY)
+        // FFmpeg, then OpenCV's own MJPEG reader; never CAP_ANY: its GStreamer and image-
+        // sequence backends crashed (SIGSEGV) on garbage files with several captures open in
+        // parallel threads (Debian's OpenCV 4.6).
+        let mut cap = videoio::VideoCapture::from_file(&name, videoio::CAP_FFMPEG)
             .map_err(|e| source_err(&name, e.message))?;
+        if !cap.is_opened().map_err(|e| source_err(&name, e.message))? {
+            cap = videoio::VideoCapture::from_file(&name, videoio::CAP_OPENCV_MJPEG)
+                .map_err(|e| source_err(&name, e.message))?;
+        }
         if !cap.is_opened().map_err(|e| source_err(&name, e.message))? {
             return Err(source_err(
                 &name,
@@ -584,7 +591,8 @@ impl WebcamSource {
         }
         let index =
             i32::try_from(device).map_err(|_| source_err(&name, "device index too large"))?;
-        let mut cap = videoio::VideoCapture::new(index, videoio::CAP_ANY)
+        // V4L2 directly (not CAP_ANY's GStreamer first; see `VideoFileSource::open`).
+        let mut cap = videoio::VideoCapture::new(index, videoio::CAP_V4L2)
             .map_err(|e| source_err(&name, e.message))?;
         if !cap.is_opened().map_err(|e| source_err(&name, e.message))? {
             return Err(source_err(
