@@ -242,14 +242,7 @@ pub(crate) fn run_trials(
                 // Many trials' per-cycle supervisor messages would bury the progress bar:
                 // workers log errors only unless RUST_LOG says otherwise (safety events are in
                 // each trial's log and summary.json).
-                let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-                    .unwrap_or_else(|_| "error".into());
-                let _log = tracing::subscriber::set_default(
-                    tracing_subscriber::fmt()
-                        .with_env_filter(filter)
-                        .with_writer(std::io::stderr)
-                        .finish(),
-                );
+                let _log = crate::trial::scoped_log("error");
                 while let Some(session) = queue.lock().map_or(None, |mut q| q.pop_front()) {
                     for trial in session {
                         let run = run_one(trial, trial_config, dir);
@@ -381,14 +374,7 @@ fn run_real_session(args: &ExperimentArgs, participant: &str) -> anyhow::Result<
         dir.display()
     );
     // Trial logs: errors and the trial's own warnings only, as `hrc-adapt trial` does.
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| "error,hrc_adapt=warn".into());
-    let _log = tracing::subscriber::set_default(
-        tracing_subscriber::fmt()
-            .with_env_filter(filter)
-            .with_writer(std::io::stderr)
-            .finish(),
-    );
+    let _log = crate::trial::scoped_log(crate::trial::TRIAL_LOG);
     // Ctrl-C during a trial stops that trial through the supervisor (the flag is cleared
     // before each trial); at a prompt, answer `quit`.
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));

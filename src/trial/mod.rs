@@ -114,14 +114,7 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
     // live display: the trial thread logs warnings of the trial itself and errors only, unless
     // RUST_LOG says otherwise. Every verdict is in trial.mcap (/robot/command), and the
     // debounced safety events in /safety/events and summary.json.
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| "error,hrc_adapt=warn".into());
-    let _log = tracing::subscriber::set_default(
-        tracing_subscriber::fmt()
-            .with_env_filter(filter)
-            .with_writer(std::io::stderr)
-            .finish(),
-    );
+    let _log = scoped_log(TRIAL_LOG);
     let stop = Arc::new(AtomicBool::new(false));
     install_ctrl_c(stop.clone());
     let bar = runtime::progress_bar(true);
@@ -237,6 +230,23 @@ pub(crate) fn cue_source(
         store_video: store_video.map(std::path::Path::to_path_buf),
         require_depth: false,
     }))
+}
+
+/// The log filter while a trial runs, unless `RUST_LOG` says otherwise: errors, and the
+/// trial's own warnings.
+pub(crate) const TRIAL_LOG: &str = "error,hrc_adapt=warn";
+
+/// Logs to stderr with `RUST_LOG`'s filter, else `default`, on this thread until the guard is
+/// dropped.
+pub(crate) fn scoped_log(default: &str) -> tracing::subscriber::DefaultGuard {
+    let filter =
+        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| default.into());
+    tracing::subscriber::set_default(
+        tracing_subscriber::fmt()
+            .with_env_filter(filter)
+            .with_writer(std::io::stderr)
+            .finish(),
+    )
 }
 
 /// Sets `stop` on every Ctrl-C (a small thread with a current-thread tokio runtime).
