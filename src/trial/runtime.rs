@@ -227,7 +227,6 @@ pub(crate) fn run_simulated_with(
 /// Run one trial on `robot` with the simulated operator (see [`run_simulated_with`]). `Sim`
 /// runs on the mock clock; the RTDE robots run paced on the controller's timestamps
 /// (`backend.rs`).
-#[allow(dead_code)] // the emulator test and the experiment runner's path
 pub(crate) fn run_trial_with(
     spec: &TrialSpec,
     robot: &RobotChoice,
