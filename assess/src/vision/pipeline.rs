@@ -786,9 +786,6 @@ impl Pipeline {
         }
         if self.config.hands {
             out.hands = self.hands(image, out.pose.as_ref())?;
-            if let Some(pose) = out.pose.as_ref() {
-                out.hands.retain(|h| belongs_to(h, pose));
-            }
         }
         self.frame += 1;
         self.runs.frames += 1;
@@ -1055,8 +1052,12 @@ impl Pipeline {
                 right_hand,
                 roi: rect.to_pixels(size),
             };
-            // The same hand found twice (two ROIs on one hand): keep the first.
-            if found.iter().any(|h| same_hand(h, &hand)) {
+            // The same hand found twice (two ROIs on one hand): keep the first. Someone else's
+            // hand is neither reported nor tracked (tracking it would hold a slot the
+            // operator's hand needs).
+            if found.iter().any(|h| same_hand(h, &hand))
+                || pose.is_some_and(|p| !belongs_to(&hand, p))
+            {
                 continue;
             }
             let s = slot.unwrap_or(if right_hand >= 0.5 { 1 } else { 0 });
