@@ -572,7 +572,7 @@ mod camera {
             };
             let landmarks = self
                 .pipeline
-                .process(&frame.color, frame.depth.as_ref())
+                .process_at(frame.t, &frame.color, frame.depth.as_ref())
                 .with_context(|| format!("landmarks of frame {}", frame.index))?;
             let cues =
                 self.extractor
