@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 
 use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
 use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::{Notify, mpsc};
+use tokio::sync::{Notify, mpsc, watch};
 use tokio::task::JoinHandle;
 
 use crate::codec::{
@@ -32,10 +32,10 @@ use crate::codec::{
     PROTOCOL_VERSION, TextMessage, Value, encode_data_package, known_field_type, level,
 };
 use crate::dashboard::{DashboardCommand, robot_mode_name, safety_status_name};
-use crate::script::{DOUBLE_REGISTERS, INT_REGISTERS, RegisterMap};
+use crate::script::{DOUBLE_REGISTERS, INT_REGISTERS, RegisterMap, ServoFeedforward};
 use crate::sim::SimRobot;
 use crate::trace::Trace;
-use crate::types::{JointCommand, Robot, RobotState};
+use crate::types::{JointCommand, Joints, Robot, RobotState};
 use crate::{Result, RobotIoError};
 
 /// Controller cycle \[s\].
@@ -187,7 +187,11 @@ const SIM_ZERO_BASE: usize = 1000;
 /// The SimRobot starts with its program stopped. A script containing our control program
 /// (recognised by [`RegisterMap::from_program`]) starts it; from then on each cycle the
 /// registers are decoded like the program does and a new command (new sequence number) is
-/// sent to the SimRobot. The watchdog is armed at the first write of the command register
+/// sent to the SimRobot. While a servo command is in force, every cycle (each of the
+/// `speedup` cycles of a burst too) sends the SimRobot its extrapolated target,
+/// [`ServoFeedforward::target`] n cycles after the command arrived, as the URScript program
+/// does (see [`crate::script`]; the emulator runs the program with servoj time t = one
+/// cycle). The watchdog is armed at the first write of the command register
 /// after the program starts: when no write arrives for `1 / watchdog_hz` seconds of virtual
 /// time, the program is stopped (the arm brakes to rest, `runtime_state` goes STOPPED).
 #[derive(Debug)]
@@ -197,9 +201,25 @@ pub struct SimBackend {
     program: Option<RegisterMap>,
     program_start_cycle: u64,
     last_seq: Option<i32>,
+    /// The servo command in force, for the per-cycle extrapolation.
+    servo: Option<ServoInForce>,
     watchdog_trips: u64,
     commands_executed: u64,
     remote_control: bool,
+}
+
+/// A servo command the program executes, and how long it has been in force.
+#[derive(Debug, Clone, Copy)]
+struct ServoInForce {
+    /// The target as written [rad].
+    q: Joints,
+    lookahead_s: f64,
+    gain: f64,
+    feedforward: ServoFeedforward,
+    /// Cycles since its sequence number arrived.
+    since_cycles: u64,
+    /// The target last sent to the SimRobot [rad].
+    sent: Option<Joints>,
 }
 
 impl SimBackend {
@@ -217,6 +237,7 @@ impl SimBackend {
             program: None,
             program_start_cycle: 0,
             last_seq: None,
+            servo: None,
             watchdog_trips: 0,
             commands_executed: 0,
             remote_control: true,
@@ -284,14 +305,61 @@ impl SimBackend {
         };
         let seq = ints.get(1).copied();
         if seq == self.last_seq {
+            if let Some(servo) = &mut self.servo {
+                servo.since_cycles = servo.since_cycles.saturating_add(1);
+            }
+            self.send_servo_target(map.extrapolate_max_s);
             return;
         }
         self.last_seq = seq;
-        if let Some(cmd) = RegisterMap::decode(&ints, &doubles) {
-            self.commands_executed += 1;
-            if let Err(e) = self.robot.send(&cmd) {
-                tracing::warn!("emulator: simulated robot refused {cmd:?}: {e}");
+        self.servo = None;
+        let Some(decoded) = RegisterMap::decode(&ints, &doubles) else {
+            return;
+        };
+        self.commands_executed += 1;
+        match decoded.command {
+            JointCommand::Servo {
+                q,
+                lookahead_s,
+                gain,
+            } => {
+                self.servo = Some(ServoInForce {
+                    q,
+                    lookahead_s,
+                    gain,
+                    feedforward: decoded.feedforward,
+                    since_cycles: 0,
+                    sent: None,
+                });
+                self.send_servo_target(map.extrapolate_max_s);
             }
+            cmd => {
+                if let Err(e) = self.robot.send(&cmd) {
+                    tracing::warn!("emulator: simulated robot refused {cmd:?}: {e}");
+                }
+            }
+        }
+    }
+
+    /// Sends the servo command in force with its extrapolated target, unless that is the
+    /// target sent last (a held target is latched already).
+    fn send_servo_target(&mut self, extrapolate_max_s: f64) {
+        let Some(servo) = &mut self.servo else { return };
+        let since_s = servo.since_cycles as f64 * CYCLE_S;
+        let target = servo
+            .feedforward
+            .target(&servo.q, since_s, extrapolate_max_s);
+        if servo.sent == Some(target) {
+            return;
+        }
+        servo.sent = Some(target);
+        let cmd = JointCommand::Servo {
+            q: target,
+            lookahead_s: servo.lookahead_s,
+            gain: servo.gain,
+        };
+        if let Err(e) = self.robot.send(&cmd) {
+            tracing::warn!("emulator: simulated robot refused {cmd:?}: {e}");
         }
     }
 }
@@ -370,6 +438,7 @@ impl EmulatorBackend for SimBackend {
         self.program = Some(map);
         self.program_start_cycle = self.robot.cycles();
         self.last_seq = None;
+        self.servo = None;
         true
     }
 
@@ -682,6 +751,8 @@ struct World {
     sessions: HashMap<u64, Arc<Notify>>,
     cycle: u64,
     silent: bool,
+    /// Frozen by [`Emulator::pause`]: no cycle runs, nothing is sent.
+    paused: bool,
     stall_timeout: Duration,
 }
 
@@ -845,6 +916,8 @@ fn input_target(name: &str) -> Option<(Target, FieldType)> {
 pub struct Emulator {
     world: Arc<Mutex<World>>,
     tasks: Vec<JoinHandle<()>>,
+    /// `true` while paused ([`Emulator::pause`]); every server waits on it.
+    pause: watch::Sender<bool>,
     rtde: SocketAddr,
     dashboard: SocketAddr,
     secondary: SocketAddr,
@@ -894,16 +967,23 @@ impl Emulator {
             sessions: HashMap::new(),
             cycle: 0,
             silent: false,
+            paused: false,
             stall_timeout: cfg.stall_timeout,
         }));
         let cfg = Arc::new(cfg);
         let programs = Arc::new(AtomicU64::new(0));
+        let (pause, paused) = watch::channel(false);
         let tasks = vec![
             tokio::spawn(ticker(world.clone(), cfg.speedup)),
-            tokio::spawn(serve_rtde(rtde, world.clone(), cfg.clone())),
-            tokio::spawn(serve_dashboard(dash, world.clone())),
-            tokio::spawn(serve_script(sec, world.clone(), programs.clone())),
-            tokio::spawn(serve_script(rt, world.clone(), programs.clone())),
+            tokio::spawn(serve_rtde(rtde, world.clone(), cfg.clone(), paused.clone())),
+            tokio::spawn(serve_dashboard(dash, world.clone(), paused.clone())),
+            tokio::spawn(serve_script(
+                sec,
+                world.clone(),
+                programs.clone(),
+                paused.clone(),
+            )),
+            tokio::spawn(serve_script(rt, world.clone(), programs.clone(), paused)),
         ];
         tracing::info!(
             "emulator: rtde {rtde_addr}, dashboard {dash_addr}, script {sec_addr} / {rt_addr}: {}",
@@ -912,6 +992,7 @@ impl Emulator {
         Ok(Emulator {
             world,
             tasks,
+            pause,
             rtde: rtde_addr,
             dashboard: dash_addr,
             secondary: sec_addr,
@@ -984,13 +1065,42 @@ impl Emulator {
         self.with_backend(|b| b.as_any_mut().downcast_mut::<TraceBackend>().map(f))
     }
 
-    /// Stops every server and closes every connection.
-    pub fn shutdown(&mut self) {
+    /// Freezes the controller, as `kill -STOP` would (a test hook for link loss): no cycle
+    /// runs (the virtual clock, the watchdog and the arm stand still) and nothing is sent;
+    /// connections stay open, and what clients send (inputs, handshakes, scripts, dashboard
+    /// commands) waits, unanswered, until [`Emulator::resume`]. New connections are accepted
+    /// (by the kernel, as for a stopped process) but not served.
+    pub fn pause(&self) {
+        lock(&self.world).paused = true;
+        self.pause.send_replace(true);
+    }
+
+    /// Ends a [`Emulator::pause`]: the clock runs on from where it stopped and waiting
+    /// requests are served in order.
+    pub fn resume(&self) {
+        lock(&self.world).paused = false;
+        self.pause.send_replace(false);
+    }
+
+    /// Whether the emulator is paused.
+    pub fn is_paused(&self) -> bool {
+        *self.pause.borrow()
+    }
+
+    /// Stops every server and closes every connection (a killed controller: the ports close,
+    /// reconnects are refused). Idempotent.
+    pub fn shutdown(&self) {
         self.cut_rtde_links();
         for t in &self.tasks {
             t.abort();
         }
     }
+}
+
+/// Waits until the emulator is not paused.
+async fn running(paused: &mut watch::Receiver<bool>) {
+    // An error means the emulator is gone: nothing to wait for.
+    let _ = paused.wait_for(|p| !*p).await;
 }
 
 impl Drop for Emulator {
@@ -1005,13 +1115,21 @@ async fn ticker(world: Arc<Mutex<World>>, speedup: u32) {
     loop {
         interval.tick().await;
         let mut w = lock(&world);
+        if w.paused {
+            continue;
+        }
         for _ in 0..speedup {
             w.step();
         }
     }
 }
 
-async fn serve_rtde(listener: TcpListener, world: Arc<Mutex<World>>, cfg: Arc<EmulatorConfig>) {
+async fn serve_rtde(
+    listener: TcpListener,
+    world: Arc<Mutex<World>>,
+    cfg: Arc<EmulatorConfig>,
+    paused: watch::Receiver<bool>,
+) {
     let next_id = AtomicU64::new(1);
     loop {
         let Ok((stream, peer)) = listener.accept().await else {
@@ -1019,7 +1137,13 @@ async fn serve_rtde(listener: TcpListener, world: Arc<Mutex<World>>, cfg: Arc<Em
         };
         let id = next_id.fetch_add(1, Ordering::Relaxed);
         tracing::debug!("emulator: rtde client {id} from {peer}");
-        tokio::spawn(rtde_session(stream, id, world.clone(), cfg.clone()));
+        tokio::spawn(rtde_session(
+            stream,
+            id,
+            world.clone(),
+            cfg.clone(),
+            paused.clone(),
+        ));
     }
 }
 
@@ -1049,6 +1173,7 @@ async fn rtde_session(
     id: u64,
     world: Arc<Mutex<World>>,
     cfg: Arc<EmulatorConfig>,
+    mut paused: watch::Receiver<bool>,
 ) {
     let _ = stream.set_nodelay(true);
     let (r, mut w) = stream.into_split();
@@ -1072,6 +1197,11 @@ async fn rtde_session(
         tokio::select! {
             () = kill.notified() => break,
             r = read_client_package(&mut r, &mut buf) => if r.is_err() { break },
+        }
+        // Paused: the package waits, unanswered (a stopped controller process).
+        tokio::select! {
+            () = kill.notified() => break,
+            () = running(&mut paused) => {}
         }
         let pkg = match ClientPackage::decode(&buf) {
             Ok(p) => p,
@@ -1263,13 +1393,19 @@ async fn rtde_session(
     }
 }
 
-async fn serve_dashboard(listener: TcpListener, world: Arc<Mutex<World>>) {
+async fn serve_dashboard(
+    listener: TcpListener,
+    world: Arc<Mutex<World>>,
+    paused: watch::Receiver<bool>,
+) {
     loop {
         let Ok((stream, _)) = listener.accept().await else {
             continue;
         };
         let world = world.clone();
+        let mut paused = paused.clone();
         tokio::spawn(async move {
+            running(&mut paused).await;
             let (r, mut w) = stream.into_split();
             let mut lines = BufReader::new(r).lines();
             if w.write_all(b"Connected: Universal Robots Dashboard Server\n")
@@ -1279,6 +1415,7 @@ async fn serve_dashboard(listener: TcpListener, world: Arc<Mutex<World>>) {
                 return;
             }
             while let Ok(Some(line)) = lines.next_line().await {
+                running(&mut paused).await;
                 let cmd = DashboardCommand::parse(&line);
                 let reply = match cmd {
                     Some(c) => lock(&world).backend.dashboard(c),
@@ -1294,13 +1431,19 @@ async fn serve_dashboard(listener: TcpListener, world: Arc<Mutex<World>>) {
     }
 }
 
-async fn serve_script(listener: TcpListener, world: Arc<Mutex<World>>, count: Arc<AtomicU64>) {
+async fn serve_script(
+    listener: TcpListener,
+    world: Arc<Mutex<World>>,
+    count: Arc<AtomicU64>,
+    paused: watch::Receiver<bool>,
+) {
     loop {
         let Ok((mut stream, _)) = listener.accept().await else {
             continue;
         };
         let world = world.clone();
         let count = count.clone();
+        let mut paused = paused.clone();
         tokio::spawn(async move {
             // A script ends when the sender closes, or after 500 ms without more bytes.
             let mut text = Vec::new();
@@ -1313,6 +1456,7 @@ async fn serve_script(listener: TcpListener, world: Arc<Mutex<World>>, count: Ar
                 }
                 text.extend_from_slice(chunk.get(..n).unwrap_or_default());
             }
+            running(&mut paused).await;
             let text = String::from_utf8_lossy(&text);
             lock(&world).backend.load_program(&text);
             count.fetch_add(1, Ordering::Relaxed);
@@ -1320,13 +1464,14 @@ async fn serve_script(listener: TcpListener, world: Arc<Mutex<World>>, count: Ar
     }
 }
 
-/// The command the emulator's SimBackend would pass to its robot for these registers (for
-/// tools that inspect the register protocol).
+/// The command the emulator's SimBackend would pass to its robot for these registers when
+/// they arrive (for tools that inspect the register protocol): a servo target before its
+/// extrapolation, see [`crate::script::DecodedCommand`] for the feedforward.
 pub fn decode_registers(inputs: &InputRegisters, map: &RegisterMap) -> Option<JointCommand> {
     let ib = usize::from(map.int_base);
     let db = usize::from(map.double_base);
     let ints = <[i32; INT_REGISTERS]>::try_from(inputs.int.get(ib..ib + INT_REGISTERS)?).ok()?;
     let doubles =
         <[f64; DOUBLE_REGISTERS]>::try_from(inputs.double.get(db..db + DOUBLE_REGISTERS)?).ok()?;
-    RegisterMap::decode(&ints, &doubles)
+    RegisterMap::decode(&ints, &doubles).map(|d| d.command)
 }

@@ -2,14 +2,32 @@
 //!
 //! Reads the state fields of [`RobotState`] at up to 500 Hz and writes joint commands into
 //! the input registers of our control program ([`RegisterMap`]). The program itself is sent
-//! separately, with [`crate::script::ScriptSender::send_control_program`].
+//! to a script port ([`RtdeRobotConfig::program_port`]) by [`RtdeRobot::start_program`], or
+//! separately with [`crate::script::ScriptSender::send_control_program`].
+//!
+//! # Link loss and recovery
+//! The [`RtdeClient`] underneath detects a lost link (socket error, or silence longer than
+//! [`ClientConfig::link_loss_timeout`]) and reconnects on its own, with backoff: it re-runs
+//! the whole RTDE set-up (protocol version, recipes, checked against the first ones),
+//! re-sends the last inputs and restarts the stream. While it does, [`Robot::read_state`] and
+//! [`Robot::send`] fail with [`RobotIoError::LinkDown`] (the command is still kept, so the
+//! reconnection delivers the newest one). A controller whose program stopped meanwhile (its
+//! register watchdog fires when writes stop) needs the program again:
+//! [`RtdeRobot::restart_program`] re-sends it through a [`ScriptSender`] on the tokio runtime,
+//! without blocking the caller. Restarting is the caller's decision (a program stopped from
+//! the pendant must stay stopped), never automatic.
 
 use std::borrow::Cow;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 use crate::client::{ClientConfig, LinkState, OutputBuffer, RtdeClient};
 use crate::codec::{FieldSlot, Value};
-use crate::script::{INPUT_VALUES, RegisterMap};
+use crate::script::{
+    CONTROLLER_CYCLE_S, FeedforwardEstimator, INPUT_VALUES, RegisterMap, ScriptSender,
+    ServoFeedforward,
+};
 use crate::types::{JointCommand, Robot, RobotState};
 use crate::{Result, RobotIoError};
 
@@ -44,6 +62,10 @@ pub struct RtdeRobotConfig {
     pub registers: RegisterMap,
     /// Floor of the link-loss timeout (see [`ClientConfig::link_loss_min`]).
     pub link_loss_min: Duration,
+    /// Script port (30002 secondary, 30003 real-time) our control program is sent to by
+    /// [`RtdeRobot::start_program`] and [`RtdeRobot::restart_program`]; `None`: the program is
+    /// managed elsewhere and those fail.
+    pub program_port: Option<u16>,
 }
 
 impl RtdeRobotConfig {
@@ -55,6 +77,7 @@ impl RtdeRobotConfig {
             frequency_hz: 500.0,
             registers: RegisterMap::default(),
             link_loss_min: Duration::ZERO,
+            program_port: None,
         }
     }
 
@@ -73,6 +96,19 @@ impl RtdeRobotConfig {
 #[derive(Debug, Clone, Copy)]
 struct StateSlots([FieldSlot; 14]);
 
+/// Sends our control program to the controller's script port, in the background.
+#[derive(Debug)]
+struct ProgramSender {
+    sender: ScriptSender,
+    map: RegisterMap,
+    /// The runtime the client runs on (the sends are spawned there).
+    rt: tokio::runtime::Handle,
+    /// A background send is under way.
+    in_flight: Arc<AtomicBool>,
+    /// Background sends that completed without error.
+    sent: Arc<AtomicU64>,
+}
+
 /// A UR arm over RTDE. See the [module docs](self).
 #[derive(Debug)]
 pub struct RtdeRobot {
@@ -84,6 +120,11 @@ pub struct RtdeRobot {
     seq: i32,
     last: RobotState,
     received: bool,
+    program: Option<ProgramSender>,
+    /// Controller timestamp of the last state `read_state`/`wait_state` returned \[s\].
+    read_ts: f64,
+    /// Feedforward of the servo commands ([`Robot::send`]).
+    feedforward: FeedforwardEstimator,
 }
 
 impl RtdeRobot {
@@ -103,12 +144,23 @@ impl RtdeRobot {
             })?;
         }
         let mut values = [Value::Int32(0); INPUT_VALUES];
-        cfg.registers
-            .encode(&JointCommand::Stop { decel: 1.0 }, 0, &mut values);
+        cfg.registers.encode(
+            &JointCommand::Stop { decel: 1.0 },
+            &ServoFeedforward::ZERO,
+            0,
+            &mut values,
+        );
         // Idle: command id 0.
         values[0] = Value::Int32(crate::script::command_id::IDLE);
         client.send_inputs(0, &values)?;
         client.start().await?;
+        let program = cfg.program_port.map(|port| ProgramSender {
+            sender: ScriptSender::new(cfg.host.clone(), port),
+            map: cfg.registers,
+            rt: tokio::runtime::Handle::current(),
+            in_flight: Arc::new(AtomicBool::new(false)),
+            sent: Arc::new(AtomicU64::new(0)),
+        });
         Ok(RtdeRobot {
             client,
             buf,
@@ -118,6 +170,9 @@ impl RtdeRobot {
             seq: 0,
             last: RobotState::default(),
             received: false,
+            program,
+            read_ts: f64::NAN,
+            feedforward: FeedforwardEstimator::new(cfg.registers.feedforward_max_gap_s()),
         })
     }
 
@@ -126,11 +181,65 @@ impl RtdeRobot {
         &self.client
     }
 
+    /// Sends our control program to [`RtdeRobotConfig::program_port`] and waits until it is
+    /// sent (not until it plays: watch `runtime_state`). Errors with
+    /// [`RobotIoError::InvalidConfig`] when no program port is configured.
+    pub async fn start_program(&self) -> Result<()> {
+        let p = self.program_sender()?;
+        p.sender.send_control_program(&p.map).await
+    }
+
+    /// Re-sends our control program in the background (after a link loss, when the
+    /// controller's watchdog stopped it) and returns at once: `true` if a send was started,
+    /// `false` if one is still under way or no program port is configured. The controller
+    /// plays it when it can (not while the arm is still braking, nor under a safety stop): call
+    /// again until `runtime_state` shows PLAYING. Failures are logged.
+    ///
+    /// # Implementation
+    /// Never blocks; spawns one task on the runtime [`RtdeRobot::connect`] ran on (allocates).
+    pub fn restart_program(&self) -> bool {
+        let Ok(p) = self.program_sender() else {
+            return false;
+        };
+        if p.in_flight.swap(true, Ordering::AcqRel) {
+            return false;
+        }
+        let (sender, map) = (p.sender.clone(), p.map);
+        let (in_flight, sent) = (p.in_flight.clone(), p.sent.clone());
+        p.rt.spawn(async move {
+            match sender.send_control_program(&map).await {
+                Ok(()) => {
+                    sent.fetch_add(1, Ordering::Relaxed);
+                    tracing::info!("control program re-sent");
+                }
+                Err(e) => tracing::warn!("re-sending the control program failed: {e}"),
+            }
+            in_flight.store(false, Ordering::Release);
+        });
+        true
+    }
+
+    /// Background program sends ([`RtdeRobot::restart_program`]) completed so far.
+    pub fn program_restarts(&self) -> u64 {
+        self.program
+            .as_ref()
+            .map_or(0, |p| p.sent.load(Ordering::Relaxed))
+    }
+
+    fn program_sender(&self) -> Result<&ProgramSender> {
+        self.program
+            .as_ref()
+            .ok_or_else(|| RobotIoError::InvalidConfig {
+                reason: "no program port configured for this robot".into(),
+            })
+    }
+
     /// Waits up to `timeout` for a new sample and returns it in `out`.
     pub async fn wait_state(&mut self, out: &mut RobotState, timeout: Duration) -> Result<()> {
         self.client.recv_timeout(&mut self.buf, timeout).await?;
         self.decode()?;
         *out = self.last;
+        self.read_ts = self.last.timestamp_s;
         Ok(())
     }
 
@@ -172,6 +281,21 @@ impl RtdeRobot {
     }
 }
 
+impl RtdeRobot {
+    /// The controller timestamp of the newest sample received \[s\]: takes it from the
+    /// client (the next `read_state` returns it; one that fails to decode is dropped).
+    /// Never blocks, allocates nothing.
+    fn newest_timestamp(&mut self) -> f64 {
+        if let Ok(Some(_)) = self.client.try_latest(&mut self.buf) {
+            let before = self.last;
+            if self.decode().is_err() {
+                self.last = before;
+            }
+        }
+        self.last.timestamp_s
+    }
+}
+
 impl Robot for RtdeRobot {
     /// Copies the newest received state into `out`.
     ///
@@ -204,17 +328,55 @@ impl Robot for RtdeRobot {
             });
         }
         *out = self.last;
+        self.read_ts = self.last.timestamp_s;
         Ok(())
     }
 
-    /// Writes `cmd` into the input registers with the next sequence number.
+    /// Writes `cmd` into the input registers with the next sequence number, a servo command
+    /// with its feedforward (see below).
     ///
     /// # Implementation
     /// Never blocks on the network: the registers are handed to the client's writer task,
-    /// which sends them at once (latest value wins). Allocates nothing.
+    /// which sends them at once (latest value wins). Allocates nothing. While the link is
+    /// being re-established the registers are kept (the reconnection sends the newest ones)
+    /// but the command has not reached the robot: errors with [`RobotIoError::LinkDown`].
+    ///
+    /// # Feedforward
+    /// A servo target is taken as valid at the timestamp of the last state `read_state` (or
+    /// `wait_state`) returned plus one cycle; its velocity and acceleration are those of the
+    /// parabola through the last three servo targets at those times
+    /// ([`FeedforwardEstimator`], restarted by a non-servo command, a gap longer than
+    /// [`RegisterMap::feedforward_max_gap_s`] or a timestamp going back). Its age is the newest
+    /// controller timestamp the client has received when it is sent minus the timestamp of
+    /// that read (≥ 0): the robot's next cycle is one cycle after the newest sample, and the
+    /// target was meant for the cycle after the read. To know the newest timestamp, `send`
+    /// takes the newest received sample (the next `read_state` returns it); a sample that
+    /// fails to decode is dropped there.
     fn send(&mut self, cmd: &JointCommand) -> Result<()> {
         self.seq = self.seq.wrapping_add(1);
-        self.map.encode(cmd, self.seq, &mut self.values);
-        self.client.send_inputs(0, &self.values)
+        let ff = match cmd {
+            JointCommand::Servo { q, .. } => {
+                let newest_ts = self.newest_timestamp();
+                let mut ff = self.feedforward.push(self.read_ts + CONTROLLER_CYCLE_S, q);
+                let age = newest_ts - self.read_ts;
+                ff.age_s = if age.is_finite() { age.max(0.0) } else { 0.0 };
+                ff
+            }
+            JointCommand::Speed { .. } | JointCommand::Stop { .. } => {
+                self.feedforward.reset();
+                ServoFeedforward::ZERO
+            }
+        };
+        self.map.encode(cmd, &ff, self.seq, &mut self.values);
+        self.client.send_inputs(0, &self.values)?;
+        match self.client.link_state() {
+            LinkState::Up => Ok(()),
+            LinkState::Reconnecting => Err(RobotIoError::LinkDown {
+                reason: Cow::Borrowed("reconnecting; the command is kept for the reconnection"),
+            }),
+            LinkState::Closed => Err(self.client.fatal().unwrap_or(RobotIoError::LinkDown {
+                reason: Cow::Borrowed("the client is closed"),
+            })),
+        }
     }
 }

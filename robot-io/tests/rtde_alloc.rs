@@ -59,7 +59,7 @@ fn the_counter_sees_allocations() {
 #[test]
 fn rtde_robot_read_state_and_send_allocate_nothing_connected_and_link_down() {
     let rt = runtime();
-    let mut emu = rt.block_on(sim_emulator());
+    let emu = rt.block_on(sim_emulator());
     let mut cfg = RtdeRobotConfig::new("127.0.0.1");
     cfg.port = emu.rtde_addr().port();
     // Two shared cores: a generous link-loss floor so a scheduling hiccup is no link loss.
