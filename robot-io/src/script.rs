@@ -5,14 +5,71 @@
 //! them. It arms `rtde_set_watchdog` on the command register, so the program stops when the
 //! client stops writing. [`ScriptSender`] sends the program to the primary/secondary (30001,
 //! 30002) or real-time (30003) interface.
+//!
+//! # servoj feedforward and extrapolation
+//! A servo target that arrives late, or that the robot keeps for several cycles (the client
+//! missed a cycle; the emulator at `speedup` N runs N cycles per burst), would be held: the
+//! target becomes a staircase and every stair a velocity jump. So each servo command carries a
+//! [`ServoFeedforward`]: the joint velocity `qd` [rad/s] and acceleration `qdd` [rad/s²] of the
+//! commanded trajectory at the command's time, and its `age_s` [s] when it left the client. On
+//! every cycle the program servos to
+//!
+//! ```text
+//! target_j = q_j + qd_j·e_j + ½·qdd_j·e_j²,   δ = clamp(age + n·t, 0, extrapolate_max_s)
+//! ```
+//!
+//! where n counts the program's cycles (of t = the servoj time, 2 ms) since the sequence
+//! number last changed, `qd_j` and `qdd_j` are clamped to ±[`FEEDFORWARD_MAX_QD_RAD_S`] and
+//! ±[`FEEDFORWARD_MAX_QDD_RAD_S2`], and `e_j = δ` except that a joint's target never turns
+//! back: when `qd_j·qdd_j < 0`, `e_j = min(δ, −qd_j/qdd_j)` (the target stops where its
+//! extrapolated velocity reaches zero), and a joint with `qd_j = 0` holds `q_j`. Beyond
+//! `extrapolate_max_s` the target holds at δ = `extrapolate_max_s`; when writes stop
+//! altogether the watchdog stops the program as before. [`ServoFeedforward::target`] is this
+//! formula; the emulator runs it every cycle, the URScript program runs the same arithmetic.
+//! [`FeedforwardEstimator`] computes `qd` and `qdd` from the last three servo targets (the
+//! derivatives of the parabola through them), as [`crate::RtdeRobot`] does.
+//!
+//! **Safety argument.** The robot never goes further than `extrapolate_max_s` beyond the last
+//! target the client sent (and the supervisor passed) along that target's own velocity and
+//! acceleration: per joint `|target − q| ≤ |qd|·δmax + ½·|qdd|·δmax²`. With the clamps at the
+//! UR5e limits (π rad/s, π rad/s²) and the default δmax = 3 cycles = 0.006 s that is at most
+//! π·0.006 + ½·π·0.006² ≈ 0.0189 rad per joint, the distance the joint covers in 6 ms at its
+//! top speed. The bound lives in the program (rendered from [`RegisterMap::extrapolate_max_s`]
+//! when it is sent, [`RegisterMap::validate`] keeps it within one watchdog period), not in a
+//! register, so no register write can widen it. Only on the emulator is `extrapolate_max_s`
+//! scaled with the speedup (its clock is virtual). The supervisor's stopping-configuration
+//! checks cover this distance: they check where the joints come to rest if a stop follows the
+//! command, `q + v·t_stop/2` with `t_stop = max|v| / a_stop`, which is at least `|v|·δmax`
+//! along the command's velocity v whenever the fastest joint moves faster than
+//! `2·a_stop·δmax` (0.038 rad/s at a_stop = π rad/s² and δmax = 6 ms). Below that speed the
+//! extrapolated target can pass the checked rest point by at most
+//! 0.038·0.006 + ½·π·0.006² ≈ 3·10⁻⁴ rad per joint. The extrapolated target never turns back
+//! and never passes the point where its own velocity reaches zero.
+//!
+//! # Register layout
+//! With the defaults `int_base = double_base = 24` (offsets from the base in brackets):
+//!
+//! | register | content |
+//! |---|---|
+//! | `input_int_register_24` (+0) | command id ([`command_id`]); the watchdog watches it |
+//! | `input_int_register_25` (+1) | sequence number (incremented per command) |
+//! | `input_double_register_24..=29` (+0..=5) | joint targets, q \[rad\] or qd [rad/s] |
+//! | `input_double_register_30` (+6) | servoj time \[s\] |
+//! | `input_double_register_31` (+7) | servoj lookahead \[s\], in [0.03, 0.2] |
+//! | `input_double_register_32` (+8) | servoj gain [-], in [100, 2000] |
+//! | `input_double_register_33` (+9) | speedj acceleration or stopj deceleration [rad/s²] |
+//! | `input_double_register_34..=39` (+10..=15) | servoj feedforward velocity qd [rad/s] |
+//! | `input_double_register_40..=45` (+16..=21) | servoj feedforward acceleration qdd [rad/s²] |
+//! | `input_double_register_46` (+22) | age of the servoj target when sent \[s\] |
 
+use std::f64::consts::PI;
 use std::time::Duration;
 
 use tokio::io::AsyncWriteExt;
 use tokio::net::TcpStream;
 
 use crate::codec::Value;
-use crate::types::JointCommand;
+use crate::types::{JointCommand, Joints};
 use crate::{Result, RobotIoError};
 
 /// Secondary interface port (accepts URScript).
@@ -41,31 +98,212 @@ pub mod command_id {
 /// Integer registers used, counted from [`RegisterMap::int_base`].
 pub const INT_REGISTERS: usize = 2;
 /// Double registers used, counted from [`RegisterMap::double_base`].
-pub const DOUBLE_REGISTERS: usize = 10;
+pub const DOUBLE_REGISTERS: usize = 23;
 /// Values in one input package of the register protocol.
 pub const INPUT_VALUES: usize = INT_REGISTERS + DOUBLE_REGISTERS;
 
-/// Where the register protocol lives and how the watchdog is set.
+/// Offsets of the double registers from [`RegisterMap::double_base`].
+mod offset {
+    pub(super) const TIME: usize = 6;
+    pub(super) const LOOKAHEAD: usize = 7;
+    pub(super) const GAIN: usize = 8;
+    pub(super) const ACC: usize = 9;
+    pub(super) const QD: usize = 10;
+    pub(super) const QDD: usize = 16;
+    pub(super) const AGE: usize = 22;
+}
+
+/// The controller cycle the program's extrapolation counts in \[s\] (servoj time 2 ms).
+pub const CONTROLLER_CYCLE_S: f64 = 0.002;
+/// Default [`RegisterMap::extrapolate_max_s`]: three controller cycles \[s\].
+pub const DEFAULT_EXTRAPOLATE_MAX_S: f64 = 3.0 * CONTROLLER_CYCLE_S;
+/// The program clamps the feedforward velocity to ± this [rad/s] (UR5e joint speed limit).
+pub const FEEDFORWARD_MAX_QD_RAD_S: f64 = PI;
+/// The program clamps the feedforward acceleration to ± this [rad/s²] (UR5e nominal joint
+/// acceleration).
+pub const FEEDFORWARD_MAX_QDD_RAD_S2: f64 = PI;
+/// Servo targets further apart in time than this many × [`RegisterMap::extrapolate_max_s`]
+/// restart the feedforward estimate (see [`RegisterMap::feedforward_max_gap_s`]) [-].
+pub const FEEDFORWARD_GAP_FACTOR: f64 = 4.0;
+
+/// The feedforward a servo command carries (see the [module docs](self)).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ServoFeedforward {
+    /// Joint velocity of the commanded trajectory at the target's time [rad/s].
+    pub qd: Joints,
+    /// Joint acceleration of the commanded trajectory at the target's time [rad/s²].
+    pub qdd: Joints,
+    /// How late the target already is when it leaves the client \[s\], ≥ 0.
+    pub age_s: f64,
+}
+
+impl ServoFeedforward {
+    /// No feedforward: the target is held as sent.
+    pub const ZERO: ServoFeedforward = ServoFeedforward {
+        qd: [0.0; 6],
+        qdd: [0.0; 6],
+        age_s: 0.0,
+    };
+
+    /// The values the program works with: non-finite values become 0, `qd` and `qdd` are
+    /// clamped to ±[`FEEDFORWARD_MAX_QD_RAD_S`] and ±[`FEEDFORWARD_MAX_QDD_RAD_S2`], the age to
+    /// ≥ 0.
+    pub fn clamped(&self) -> ServoFeedforward {
+        let c = |x: f64, m: f64| if x.is_finite() { x.clamp(-m, m) } else { 0.0 };
+        ServoFeedforward {
+            qd: self.qd.map(|v| c(v, FEEDFORWARD_MAX_QD_RAD_S)),
+            qdd: self.qdd.map(|a| c(a, FEEDFORWARD_MAX_QDD_RAD_S2)),
+            age_s: if self.age_s.is_finite() {
+                self.age_s.max(0.0)
+            } else {
+                0.0
+            },
+        }
+    }
+
+    /// The servo target the program commands `since_s` [s] after the target `q` [rad] arrived
+    /// (n cycles × 2 ms), extrapolating at most `max_s` [s] (the module docs give the formula).
+    /// Allocates nothing.
+    pub fn target(&self, q: &Joints, since_s: f64, max_s: f64) -> Joints {
+        let ff = self.clamped();
+        let max_s = if max_s.is_finite() {
+            max_s.max(0.0)
+        } else {
+            0.0
+        };
+        let d = ff.age_s + since_s;
+        let d = if d.is_finite() {
+            d.clamp(0.0, max_s)
+        } else {
+            0.0
+        };
+        let mut out = *q;
+        for ((o, v), a) in out.iter_mut().zip(ff.qd).zip(ff.qdd) {
+            let e = if v == 0.0 {
+                0.0
+            } else if v * a < 0.0 {
+                d.min(-v / a)
+            } else {
+                d
+            };
+            *o += (v + 0.5 * a * e) * e;
+        }
+        out
+    }
+}
+
+/// Estimates [`ServoFeedforward::qd`] and [`ServoFeedforward::qdd`] from the last three servo
+/// targets and the times they are valid at.
 ///
-/// Registers (with the defaults `int_base = double_base = 24`):
-/// - `input_int_register_24`: command id ([`command_id`]); the watchdog watches it;
-/// - `input_int_register_25`: sequence number (incremented per command);
-/// - `input_double_register_24..29`: joint targets, q \[rad\] or qd [rad/s];
-/// - `input_double_register_30`: servoj time \[s\];
-/// - `input_double_register_31`: servoj lookahead \[s\], in [0.03, 0.2];
-/// - `input_double_register_32`: servoj gain [-], in [100, 2000];
-/// - `input_double_register_33`: speedj acceleration or stopj deceleration [rad/s²].
+/// With targets q0, q1, q2 at t0 < t1 < t2 (h1 = t1 − t0, h2 = t2 − t1), the estimate is the
+/// derivative at t2 of the parabola through the three: `qdd = 2·(v2 − v1)/(h1 + h2)` and
+/// `qd = v2 + qdd·h2/2`, with the backward differences v1 = (q1 − q0)/h1, v2 = (q2 − q1)/h2.
+/// It is exact for trajectories of degree ≤ 2, so the extrapolation of a jerk-limited
+/// trajectory errs by O(jerk·h³). With two targets `qd = v2` and `qdd = 0`; with one, both 0.
+/// A joint whose `qd` points against its last step v2 (it stopped or turned within the last
+/// interval) gets `qd = qdd = 0`: no extrapolation across a kink.
+///
+/// A target at the same time as the newest replaces it. A target earlier than the newest (a
+/// new controller session) or more than `max_gap_s` after it restarts the estimate, as does
+/// [`FeedforwardEstimator::reset`] (call it for a non-servo command). Allocates nothing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FeedforwardEstimator {
+    max_gap_s: f64,
+    /// Newest first.
+    history: [Option<(f64, Joints)>; 3],
+}
+
+impl FeedforwardEstimator {
+    /// An empty estimator that restarts after gaps longer than `max_gap_s` \[s\].
+    pub fn new(max_gap_s: f64) -> Self {
+        Self {
+            max_gap_s,
+            history: [None; 3],
+        }
+    }
+
+    /// Forgets every target: the next estimate is 0.
+    pub fn reset(&mut self) {
+        self.history = [None; 3];
+    }
+
+    /// Adds target `q` [rad] valid at controller time `valid_at_s` \[s\] and returns the
+    /// estimate at that time (`age_s` = 0). Non-finite inputs reset it and give 0.
+    pub fn push(&mut self, valid_at_s: f64, q: &Joints) -> ServoFeedforward {
+        if !valid_at_s.is_finite() || !q.iter().all(|v| v.is_finite()) {
+            self.reset();
+            return ServoFeedforward::ZERO;
+        }
+        let [newest, prev, _] = self.history;
+        match newest {
+            Some((t, _)) if valid_at_s == t => self.history[0] = Some((valid_at_s, *q)),
+            Some((t, _)) if valid_at_s > t && valid_at_s - t <= self.max_gap_s => {
+                self.history = [Some((valid_at_s, *q)), newest, prev];
+            }
+            _ => self.history = [Some((valid_at_s, *q)), None, None],
+        }
+        self.estimate()
+    }
+
+    fn estimate(&self) -> ServoFeedforward {
+        let mut ff = ServoFeedforward::ZERO;
+        let [Some((t2, q2)), Some((t1, q1)), oldest] = self.history else {
+            return ff;
+        };
+        let h2 = t2 - t1;
+        for j in 0..6 {
+            let (Some(a2), Some(a1), Some(qd), Some(qdd)) =
+                (q2.get(j), q1.get(j), ff.qd.get_mut(j), ff.qdd.get_mut(j))
+            else {
+                continue;
+            };
+            let v2 = (a2 - a1) / h2;
+            let (v, a) = match oldest {
+                Some((t0, q0)) => {
+                    let v1 = (a1 - q0.get(j).copied().unwrap_or(*a1)) / (t1 - t0);
+                    let a = 2.0 * (v2 - v1) / (t2 - t0);
+                    (v2 + a * h2 / 2.0, a)
+                }
+                None => (v2, 0.0),
+            };
+            if v * v2 > 0.0 && v.is_finite() && a.is_finite() {
+                *qd = v;
+                *qdd = a;
+            }
+        }
+        ff
+    }
+}
+
+/// A command read back from the registers, as the program executes it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DecodedCommand {
+    /// The command (lookahead, gain and accelerations clamped as the program clamps them).
+    pub command: JointCommand,
+    /// Its feedforward, clamped ([`ServoFeedforward::clamped`]); [`ServoFeedforward::ZERO`]
+    /// for speedj and stopj.
+    pub feedforward: ServoFeedforward,
+    /// The sequence number.
+    pub seq: i32,
+}
+
+/// Where the register protocol lives, how the watchdog is set and how far servo targets are
+/// extrapolated (the [module docs](self) give the register layout).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RegisterMap {
     /// First integer input register (24 and up: fieldbus adapters and URCaps often claim
     /// 0–23).
     pub int_base: u8,
-    /// First double input register.
+    /// First double input register (at most 25: the protocol uses 23 of them).
     pub double_base: u8,
     /// Minimum command-register write frequency before the watchdog stops the program \[Hz\].
     pub watchdog_hz: f64,
     /// servoj time sent with each servo command \[s\] (one 500 Hz cycle by default).
     pub servo_time_s: f64,
+    /// How far the program extrapolates a servo target beyond its arrival, age included \[s\],
+    /// in [0, 1 / `watchdog_hz`]; [`DEFAULT_EXTRAPOLATE_MAX_S`] (3 cycles) on a real robot.
+    /// Rendered into the program, not written to a register.
+    pub extrapolate_max_s: f64,
 }
 
 impl Default for RegisterMap {
@@ -75,12 +313,20 @@ impl Default for RegisterMap {
             double_base: 24,
             watchdog_hz: 10.0,
             servo_time_s: 0.002,
+            extrapolate_max_s: DEFAULT_EXTRAPOLATE_MAX_S,
         }
     }
 }
 
+/// A float as URScript reads it (always with a decimal point, never an exponent).
+fn urscript_float(x: f64) -> String {
+    let s = format!("{x}");
+    if s.contains('.') { s } else { format!("{s}.0") }
+}
+
 impl RegisterMap {
-    /// Checks the registers fit in 0..=47 and the watchdog frequency is positive.
+    /// Checks the registers fit in 0..=47, the watchdog frequency is positive, the servoj
+    /// time is in [0.002, 0.1] s and `extrapolate_max_s` in [0, 1 / `watchdog_hz`].
     pub fn validate(&self) -> Result<()> {
         let int_top = usize::from(self.int_base) + INT_REGISTERS - 1;
         let dbl_top = usize::from(self.double_base) + DOUBLE_REGISTERS - 1;
@@ -102,7 +348,22 @@ impl RegisterMap {
                 reason: "servoj time must be in [0.002, 0.1] s".into(),
             });
         }
+        if !(self.extrapolate_max_s >= 0.0 && self.extrapolate_max_s <= 1.0 / self.watchdog_hz) {
+            return Err(RobotIoError::InvalidConfig {
+                reason: format!(
+                    "extrapolate_max_s {} must be in [0, {}] s (one watchdog period)",
+                    self.extrapolate_max_s,
+                    1.0 / self.watchdog_hz
+                ),
+            });
+        }
         Ok(())
+    }
+
+    /// Servo targets further apart than this \[s\] restart the feedforward estimate:
+    /// [`FEEDFORWARD_GAP_FACTOR`] × `extrapolate_max_s` (24 ms by default).
+    pub fn feedforward_max_gap_s(&self) -> f64 {
+        FEEDFORWARD_GAP_FACTOR * self.extrapolate_max_s
     }
 
     /// The input field names, in the order of [`RegisterMap::encode`]'s values.
@@ -123,10 +384,17 @@ impl RegisterMap {
         format!("input_int_register_{}", self.int_base)
     }
 
-    /// Writes `cmd` with sequence number `seq` into `out`, in the order of
-    /// [`RegisterMap::input_names`]. Allocates nothing.
-    pub fn encode(&self, cmd: &JointCommand, seq: i32, out: &mut [Value; INPUT_VALUES]) {
-        let (id, joints, time, lookahead, gain, acc) = match *cmd {
+    /// Writes `cmd` with feedforward `ff` (written for servo commands only; zeros otherwise)
+    /// and sequence number `seq` into `out`, in the order of [`RegisterMap::input_names`].
+    /// Allocates nothing.
+    pub fn encode(
+        &self,
+        cmd: &JointCommand,
+        ff: &ServoFeedforward,
+        seq: i32,
+        out: &mut [Value; INPUT_VALUES],
+    ) {
+        let (id, joints, time, lookahead, gain, acc, ff) = match *cmd {
             JointCommand::Servo {
                 q,
                 lookahead_s,
@@ -138,55 +406,111 @@ impl RegisterMap {
                 lookahead_s,
                 gain,
                 0.0,
+                *ff,
             ),
-            JointCommand::Speed { qd, acc } => (command_id::SPEED, qd, 0.0, 0.0, 0.0, acc),
-            JointCommand::Stop { decel } => (command_id::STOP, [0.0; 6], 0.0, 0.0, 0.0, decel),
+            JointCommand::Speed { qd, acc } => (
+                command_id::SPEED,
+                qd,
+                0.0,
+                0.0,
+                0.0,
+                acc,
+                ServoFeedforward::ZERO,
+            ),
+            JointCommand::Stop { decel } => (
+                command_id::STOP,
+                [0.0; 6],
+                0.0,
+                0.0,
+                0.0,
+                decel,
+                ServoFeedforward::ZERO,
+            ),
         };
-        let [j0, j1, j2, j3, j4, j5] = joints;
-        *out = [
-            Value::Int32(id),
-            Value::Int32(seq),
-            Value::Double(j0),
-            Value::Double(j1),
-            Value::Double(j2),
-            Value::Double(j3),
-            Value::Double(j4),
-            Value::Double(j5),
-            Value::Double(time),
-            Value::Double(lookahead),
-            Value::Double(gain),
-            Value::Double(acc),
+        let mut doubles = [0.0; DOUBLE_REGISTERS];
+        for (d, v) in doubles.iter_mut().zip(joints) {
+            *d = v;
+        }
+        let scalars = [
+            (offset::TIME, time),
+            (offset::LOOKAHEAD, lookahead),
+            (offset::GAIN, gain),
+            (offset::ACC, acc),
+            (offset::AGE, ff.age_s),
         ];
-    }
-
-    /// Reads the command the program would execute from register values (`ints` from
-    /// `int_base`, `doubles` from `double_base`), clamping lookahead and gain as the program
-    /// does. `None` for IDLE or an unknown id.
-    pub fn decode(
-        ints: &[i32; INT_REGISTERS],
-        doubles: &[f64; DOUBLE_REGISTERS],
-    ) -> Option<JointCommand> {
-        let [id, _seq] = *ints;
-        let [j0, j1, j2, j3, j4, j5, _time, lookahead, gain, acc] = *doubles;
-        let joints = [j0, j1, j2, j3, j4, j5];
-        match id {
-            command_id::SERVO => Some(JointCommand::Servo {
-                q: joints,
-                lookahead_s: lookahead.clamp(0.03, 0.2),
-                gain: gain.clamp(100.0, 2000.0),
-            }),
-            command_id::SPEED => Some(JointCommand::Speed {
-                qd: joints,
-                acc: acc.clamp(0.01, 40.0),
-            }),
-            command_id::STOP => Some(JointCommand::Stop {
-                decel: acc.clamp(0.01, 40.0),
-            }),
-            _ => None,
+        for (i, v) in scalars {
+            if let Some(d) = doubles.get_mut(i) {
+                *d = v;
+            }
+        }
+        for (d, v) in doubles.iter_mut().skip(offset::QD).zip(ff.qd) {
+            *d = v;
+        }
+        for (d, v) in doubles.iter_mut().skip(offset::QDD).zip(ff.qdd) {
+            *d = v;
+        }
+        let mut values = out.iter_mut();
+        for v in [id, seq] {
+            if let Some(o) = values.next() {
+                *o = Value::Int32(v);
+            }
+        }
+        for (o, d) in values.zip(doubles) {
+            *o = Value::Double(d);
         }
     }
 
-    /// The control program with this map's registers and watchdog filled in.
+    /// Reads the command the program would execute from register values (`ints` from
+    /// `int_base`, `doubles` from `double_base`), clamping lookahead, gain, accelerations and
+    /// the feedforward as the program does. `None` for IDLE or an unknown id.
+    pub fn decode(
+        ints: &[i32; INT_REGISTERS],
+        doubles: &[f64; DOUBLE_REGISTERS],
+    ) -> Option<DecodedCommand> {
+        let [id, seq] = *ints;
+        let at = |i: usize| doubles.get(i).copied().unwrap_or(0.0);
+        let joints: Joints = std::array::from_fn(at);
+        let lookahead = at(offset::LOOKAHEAD);
+        let gain = at(offset::GAIN);
+        let acc = at(offset::ACC);
+        let (command, feedforward) = match id {
+            command_id::SERVO => (
+                JointCommand::Servo {
+                    q: joints,
+                    lookahead_s: lookahead.clamp(0.03, 0.2),
+                    gain: gain.clamp(100.0, 2000.0),
+                },
+                ServoFeedforward {
+                    qd: std::array::from_fn(|j| at(offset::QD + j)),
+                    qdd: std::array::from_fn(|j| at(offset::QDD + j)),
+                    age_s: at(offset::AGE),
+                }
+                .clamped(),
+            ),
+            command_id::SPEED => (
+                JointCommand::Speed {
+                    qd: joints,
+                    acc: acc.clamp(0.01, 40.0),
+                },
+                ServoFeedforward::ZERO,
+            ),
+            command_id::STOP => (
+                JointCommand::Stop {
+                    decel: acc.clamp(0.01, 40.0),
+                },
+                ServoFeedforward::ZERO,
+            ),
+            _ => return None,
+        };
+        Some(DecodedCommand {
+            command,
+            feedforward,
+            seq,
+        })
+    }
+
+    /// The control program with this map's registers, watchdog and extrapolation bound
+    /// filled in.
     pub fn program(&self) -> String {
         let d = |i: usize| (usize::from(self.double_base) + i).to_string();
         let mut s = CONTROL_PROGRAM_TEMPLATE
@@ -194,12 +518,25 @@ impl RegisterMap {
             .replace("{{INT_SEQ}}", &(usize::from(self.int_base) + 1).to_string())
             .replace("{{DOUBLE_BASE}}", &self.double_base.to_string())
             .replace("{{WATCHDOG_HZ}}", &format!("{}", self.watchdog_hz))
-            .replace("{{D_TIME}}", &d(6))
-            .replace("{{D_LOOKAHEAD}}", &d(7))
-            .replace("{{D_GAIN}}", &d(8))
-            .replace("{{D_ACC}}", &d(9));
+            .replace(
+                "{{EXTRAPOLATE_MAX_S}}",
+                &urscript_float(self.extrapolate_max_s),
+            )
+            .replace("{{FF_MAX_QD}}", &urscript_float(FEEDFORWARD_MAX_QD_RAD_S))
+            .replace(
+                "{{FF_MAX_QDD}}",
+                &urscript_float(FEEDFORWARD_MAX_QDD_RAD_S2),
+            )
+            .replace("{{D_TIME}}", &d(offset::TIME))
+            .replace("{{D_LOOKAHEAD}}", &d(offset::LOOKAHEAD))
+            .replace("{{D_GAIN}}", &d(offset::GAIN))
+            .replace("{{D_ACC}}", &d(offset::ACC))
+            .replace("{{D_AGE}}", &d(offset::AGE));
         for i in 0..6 {
-            s = s.replace(&format!("{{{{D{i}}}}}"), &d(i));
+            s = s
+                .replace(&format!("{{{{D{i}}}}}"), &d(i))
+                .replace(&format!("{{{{D_QD{i}}}}}"), &d(offset::QD + i))
+                .replace(&format!("{{{{D_QDD{i}}}}}"), &d(offset::QDD + i));
         }
         s
     }
@@ -220,6 +557,7 @@ impl RegisterMap {
                 "int_base" => map.int_base = v.parse().ok()?,
                 "double_base" => map.double_base = v.parse().ok()?,
                 "watchdog_hz" => map.watchdog_hz = v.parse().ok()?,
+                "extrapolate_max_s" => map.extrapolate_max_s = v.parse().ok()?,
                 _ => {}
             }
         }
@@ -289,92 +627,354 @@ impl ScriptSender {
 
 #[cfg(test)]
 mod tests {
+    use std::collections::BTreeSet;
+
+    use proptest::prelude::*;
+
     use super::*;
+
+    /// The register numbers a program reads with `read_input_<kind>_register(N)`.
+    fn registers_read(program: &str, kind: &str) -> BTreeSet<usize> {
+        let pat = format!("read_input_{kind}_register(");
+        program
+            .match_indices(&pat)
+            .filter_map(|(i, _)| {
+                let rest = program.get(i + pat.len()..)?;
+                rest.split(')').next()?.parse().ok()
+            })
+            .collect()
+    }
 
     #[test]
     fn program_renders_every_placeholder_and_parses_back() {
         let map = RegisterMap {
             int_base: 30,
-            double_base: 36,
+            double_base: 25,
             watchdog_hz: 25.0,
             servo_time_s: 0.002,
+            extrapolate_max_s: 0.02,
         };
         let p = map.program();
         assert!(!p.contains("{{"), "unrendered placeholder in:\n{p}");
         assert!(p.contains(r#"rtde_set_watchdog("input_int_register_30", 25, "stop")"#));
-        assert!(p.contains("read_input_float_register(45)")); // 36 + 9: acceleration
-        assert!(p.contains("servoj(q, 0, 0, t, lookahead, gain)"));
+        assert!(p.contains("read_input_float_register(34)")); // 25 + 9: acceleration
+        assert!(p.contains("read_input_float_register(47) + since * t")); // 25 + 22: age
+        assert!(p.contains("seq = read_input_integer_register(31)"));
+        assert!(p.contains("clamp(read_input_float_register(47) + since * t, 0.0, 0.02)"));
+        assert!(p.contains("vc = clamp(v, -3.141592653589793, 3.141592653589793)"));
+        assert!(p.contains("ac = clamp(a, -3.141592653589793, 3.141592653589793)"));
+        assert!(p.contains(
+            "servoj(extrapolate(q, read_qd(), read_qdd(), d), 0, 0, t, lookahead, gain)"
+        ));
         assert!(p.contains("speedj(qd, a, 0.008)"));
         assert!(p.contains("stopj("));
+        // Every register of the protocol is read, and no other.
+        let doubles: BTreeSet<usize> = (25..25 + DOUBLE_REGISTERS).collect();
+        assert_eq!(registers_read(&p, "float"), doubles);
+        assert_eq!(registers_read(&p, "integer"), BTreeSet::from([30, 31]));
         assert_eq!(RegisterMap::from_program(&p), Some(map));
         assert_eq!(RegisterMap::from_program("def other():\nend\n"), None);
+        // The default renders the 6 ms bound with a decimal point.
+        let d = RegisterMap::default().program();
+        assert!(d.contains("extrapolate_max_s=0.006"), "{d}");
+        assert!(d.contains("since * t, 0.0, 0.006)"));
+        assert_eq!(RegisterMap::from_program(&d), Some(RegisterMap::default()));
+        let zero = RegisterMap {
+            extrapolate_max_s: 0.0,
+            ..RegisterMap::default()
+        };
+        assert!(zero.program().contains("since * t, 0.0, 0.0)"));
     }
 
     #[test]
-    fn out_of_range_registers_are_refused() {
-        let map = RegisterMap {
-            double_base: 40,
+    fn out_of_range_registers_and_bounds_are_refused() {
+        assert!(RegisterMap::default().validate().is_ok());
+        // 23 double registers: base 25 ends at 47, base 26 would need 48.
+        let top = RegisterMap {
+            double_base: 25,
             ..RegisterMap::default()
         };
-        assert!(map.validate().is_err());
-        assert!(RegisterMap::default().validate().is_ok());
+        assert!(top.validate().is_ok());
+        for bad in [
+            RegisterMap {
+                double_base: 26,
+                ..RegisterMap::default()
+            },
+            RegisterMap {
+                int_base: 47,
+                ..RegisterMap::default()
+            },
+            RegisterMap {
+                extrapolate_max_s: -0.001,
+                ..RegisterMap::default()
+            },
+            RegisterMap {
+                extrapolate_max_s: f64::NAN,
+                ..RegisterMap::default()
+            },
+            // Beyond one watchdog period (10 Hz: 0.1 s).
+            RegisterMap {
+                extrapolate_max_s: 0.11,
+                ..RegisterMap::default()
+            },
+        ] {
+            assert!(bad.validate().is_err(), "{bad:?} accepted");
+        }
+        // Scaled for the emulator at speedup 4, as the trial does: 2.5 Hz and 24 ms.
+        let emulated = RegisterMap {
+            watchdog_hz: 2.5,
+            extrapolate_max_s: 0.024,
+            ..RegisterMap::default()
+        };
+        assert!(emulated.validate().is_ok());
+        assert!((emulated.feedforward_max_gap_s() - 0.096).abs() < 1e-15);
+    }
+
+    fn decode_values(v: &[Value; INPUT_VALUES]) -> Option<DecodedCommand> {
+        let ints = [v[0], v[1]].map(|x| match x {
+            Value::Int32(i) => i,
+            _ => panic!("not an int: {x:?}"),
+        });
+        let doubles: [f64; DOUBLE_REGISTERS] = std::array::from_fn(|i| match v[2 + i] {
+            Value::Double(d) => d,
+            x => panic!("not a double: {x:?}"),
+        });
+        RegisterMap::decode(&ints, &doubles)
     }
 
     #[test]
     fn commands_round_trip_through_registers() {
         let map = RegisterMap::default();
         let names = map.input_names();
+        assert_eq!(names.len(), INPUT_VALUES);
         assert_eq!(names[0], "input_int_register_24");
         assert_eq!(names[1], "input_int_register_25");
         assert_eq!(names[2], "input_double_register_24");
         assert_eq!(names[11], "input_double_register_33");
-        let cmds = [
-            JointCommand::Servo {
-                q: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6],
-                lookahead_s: 0.1,
-                gain: 300.0,
-            },
+        assert_eq!(names[12], "input_double_register_34"); // qd of joint 0
+        assert_eq!(names[18], "input_double_register_40"); // qdd of joint 0
+        assert_eq!(names[24], "input_double_register_46"); // age
+        let ff = ServoFeedforward {
+            qd: [0.5, -0.25, 0.0, 1.0, -3.0, 0.125],
+            qdd: [1.5, -2.0, 0.0, 0.5, 3.0, -0.75],
+            age_s: 0.004,
+        };
+        let servo = JointCommand::Servo {
+            q: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6],
+            lookahead_s: 0.1,
+            gain: 300.0,
+        };
+        let mut v = [Value::Int32(0); INPUT_VALUES];
+        map.encode(&servo, &ff, 7, &mut v);
+        assert_eq!(v[12], Value::Double(0.5));
+        assert_eq!(v[23], Value::Double(-0.75));
+        assert_eq!(v[24], Value::Double(0.004));
+        assert_eq!(
+            decode_values(&v),
+            Some(DecodedCommand {
+                command: servo,
+                feedforward: ff,
+                seq: 7
+            })
+        );
+        // speedj and stopj carry no feedforward, whatever is passed.
+        for cmd in [
             JointCommand::Speed {
                 qd: [0.1, -0.1, 0.0, 0.0, 0.0, 0.2],
                 acc: 1.5,
             },
             JointCommand::Stop { decel: 2.0 },
-        ];
-        for cmd in cmds {
-            let mut v = [Value::Int32(0); INPUT_VALUES];
-            map.encode(&cmd, 7, &mut v);
-            let ints = [v[0], v[1]].map(|x| match x {
-                Value::Int32(i) => i,
-                _ => panic!(),
-            });
-            let doubles: [f64; DOUBLE_REGISTERS] = std::array::from_fn(|i| match v[2 + i] {
-                Value::Double(d) => d,
-                _ => panic!(),
-            });
-            assert_eq!(ints[1], 7);
-            assert_eq!(RegisterMap::decode(&ints, &doubles), Some(cmd));
+        ] {
+            map.encode(&cmd, &ff, 8, &mut v);
+            assert!(v[12..].iter().all(|x| *x == Value::Double(0.0)));
+            assert_eq!(
+                decode_values(&v),
+                Some(DecodedCommand {
+                    command: cmd,
+                    feedforward: ServoFeedforward::ZERO,
+                    seq: 8
+                })
+            );
         }
-        // Out-of-range lookahead and gain are clamped as the program does.
-        let mut v = [Value::Int32(0); INPUT_VALUES];
+        // Out-of-range lookahead, gain and feedforward are clamped as the program does;
+        // NaN feedforward and a negative age become 0.
+        let wild = ServoFeedforward {
+            qd: [10.0, -10.0, f64::NAN, 0.0, 0.0, 0.0],
+            qdd: [-10.0, 10.0, f64::INFINITY, 0.0, 0.0, 0.0],
+            age_s: -1.0,
+        };
         map.encode(
             &JointCommand::Servo {
                 q: [0.0; 6],
                 lookahead_s: 1.0,
                 gain: 5.0,
             },
+            &wild,
             1,
             &mut v,
         );
-        let doubles: [f64; DOUBLE_REGISTERS] =
-            std::array::from_fn(|i| v[2 + i].component(0).unwrap());
+        let d = decode_values(&v).unwrap();
         assert_eq!(
-            RegisterMap::decode(&[1, 1], &doubles),
-            Some(JointCommand::Servo {
+            d.command,
+            JointCommand::Servo {
                 q: [0.0; 6],
                 lookahead_s: 0.2,
                 gain: 100.0
-            })
+            }
         );
+        assert_eq!(d.feedforward.qd, [PI, -PI, 0.0, 0.0, 0.0, 0.0]);
+        assert_eq!(d.feedforward.qdd, [-PI, PI, 0.0, 0.0, 0.0, 0.0]);
+        assert_eq!(d.feedforward.age_s, 0.0);
+        let doubles: [f64; DOUBLE_REGISTERS] =
+            std::array::from_fn(|i| v[2 + i].component(0).unwrap());
         assert_eq!(RegisterMap::decode(&[0, 1], &doubles), None);
+    }
+
+    fn one_joint(qd: f64, qdd: f64, age_s: f64) -> ServoFeedforward {
+        ServoFeedforward {
+            qd: [qd, 0.0, 0.0, 0.0, 0.0, 0.0],
+            qdd: [qdd, 0.0, 0.0, 0.0, 0.0, 0.0],
+            age_s,
+        }
+    }
+
+    #[test]
+    fn extrapolated_target_worked_examples() {
+        // Worked by hand. q = 1 rad, qd = 0.5 rad/s, qdd = 2 rad/s², age 1 ms, 2 cycles
+        // (4 ms) after arrival, bound 6 ms: δ = 5 ms,
+        // target = 1 + 0.5·0.005 + ½·2·0.005² = 1 + 0.0025 + 0.000025 = 1.002525.
+        let q = [1.0, 2.0, 0.0, 0.0, 0.0, 0.0];
+        let ff = one_joint(0.5, 2.0, 0.001);
+        let t = ff.target(&q, 0.004, 0.006);
+        assert!((t[0] - 1.002525).abs() < 1e-12, "{}", t[0]);
+        assert_eq!(t[1], 2.0); // no feedforward: held
+        // Past the bound it holds at δ = 6 ms: 1 + 0.003 + ½·2·0.006² = 1.003036.
+        for since in [0.005, 0.006, 0.1, 1e9] {
+            let t = ff.target(&q, since, 0.006);
+            assert!((t[0] - 1.003036).abs() < 1e-12, "{since}: {}", t[0]);
+        }
+        // A late command (age 4 ms) is extrapolated by its age on arrival:
+        // 1 + 0.5·0.004 + ½·2·0.004² = 1.002016.
+        let late = one_joint(0.5, 2.0, 0.004);
+        assert!((late.target(&q, 0.0, 0.006)[0] - 1.002016).abs() < 1e-12);
+        // Decelerating: qd = 0.01 rad/s, qdd = −10 clamped to −π. The target stops where
+        // 0.01 − π·e = 0, e = 3.1831 ms < 6 ms, at q + ½·0.01·e = q + 1.59155e-5 rad.
+        let braking = one_joint(0.01, -10.0, 0.0);
+        let t = braking.target(&q, 0.006, 0.006);
+        let e = 0.01 / PI;
+        assert!((e - 0.0031831).abs() < 1e-7);
+        assert!((t[0] - (1.0 + 0.5 * 0.01 * e)).abs() < 1e-15);
+        assert!((t[0] - 1.0000159155).abs() < 1e-10);
+        // qd = 0: the acceleration alone never starts a motion.
+        assert_eq!(one_joint(0.0, 3.0, 0.0).target(&q, 0.006, 0.006), q);
+        // No extrapolation with a zero bound, or at δ = 0 (on time, on arrival).
+        assert_eq!(ff.target(&q, 0.004, 0.0), q);
+        assert_eq!(one_joint(0.5, 2.0, 0.0).target(&q, 0.0, 0.006), q);
+        // At the UR5e limits the safety bound: π·0.006 + ½·π·0.006² ≈ 0.0189 rad.
+        let fastest = one_joint(100.0, 100.0, 1.0);
+        let reach = fastest.target(&q, 1.0, 0.006)[0] - 1.0;
+        assert!((reach - (PI * 0.006 + 0.5 * PI * 0.006 * 0.006)).abs() < 1e-15);
+        assert!(reach < 0.019);
+    }
+
+    fn joints() -> impl Strategy<Value = Joints> {
+        proptest::array::uniform6(-6.0..6.0f64)
+    }
+
+    proptest! {
+        /// The target never leaves the safety bound, never moves against qd, moves away
+        /// from q monotonically with the time since arrival and holds beyond the bound.
+        #[test]
+        fn extrapolated_target_stays_within_its_bound(
+            q in joints(),
+            qd in proptest::array::uniform6(-5.0..5.0f64),
+            qdd in proptest::array::uniform6(-5.0..5.0f64),
+            age in -0.01..0.05f64,
+            since in 0.0..0.05f64,
+            later in 0.0..0.05f64,
+            max in 0.0..0.05f64,
+        ) {
+            let ff = ServoFeedforward { qd, qdd, age_s: age };
+            let c = ff.clamped();
+            let t = ff.target(&q, since, max);
+            let t2 = ff.target(&q, since + later, max);
+            let held = ff.target(&q, max + 1.0, max);
+            for j in 0..6 {
+                let bound = c.qd[j].abs() * max + 0.5 * c.qdd[j].abs() * max * max;
+                prop_assert!((t[j] - q[j]).abs() <= bound + 1e-12);
+                prop_assert!((t[j] - q[j]) * c.qd[j] >= 0.0);
+                prop_assert!((t2[j] - q[j]).abs() >= (t[j] - q[j]).abs() - 1e-15);
+                prop_assert!((t2[j] - q[j]).abs() <= (held[j] - q[j]).abs() + 1e-15);
+                if since + age.max(0.0) >= max {
+                    prop_assert_eq!(t[j], held[j]);
+                }
+            }
+        }
+
+        /// The estimate is exact for a quadratic, whatever the spacing of the three targets.
+        #[test]
+        fn estimate_is_exact_for_quadratics(
+            c0 in -2.0..2.0f64,
+            c1 in -1.0..1.0f64,
+            c2 in -1.5..1.5f64,
+            t0 in 0.0..100.0f64,
+            h1 in 0.002..0.02f64,
+            h2 in 0.002..0.02f64,
+        ) {
+            let f = |t: f64| c0 + c1 * (t - t0) + c2 * (t - t0).powi(2);
+            let mut est = FeedforwardEstimator::new(0.024);
+            let (ta, tb, tc) = (t0, t0 + h1, t0 + h1 + h2);
+            est.push(ta, &[f(ta); 6]);
+            est.push(tb, &[f(tb); 6]);
+            let ff = est.push(tc, &[f(tc); 6]);
+            let v = c1 + 2.0 * c2 * (tc - t0);
+            let v2 = (f(tc) - f(tb)) / h2;
+            if v * v2 > 1e-6 {
+                prop_assert!((ff.qd[0] - v).abs() < 1e-6, "qd {} vs {v}", ff.qd[0]);
+                prop_assert!((ff.qdd[0] - 2.0 * c2).abs() < 1e-3, "qdd {} vs {}", ff.qdd[0], 2.0 * c2);
+            } else if v * v2 < 0.0 {
+                // A turn within the last interval: no extrapolation.
+                prop_assert_eq!(ff.qd[0], 0.0);
+                prop_assert_eq!(ff.qdd[0], 0.0);
+            }
+            prop_assert_eq!(ff.age_s, 0.0);
+        }
+    }
+
+    #[test]
+    fn estimator_worked_example_and_restarts() {
+        // Worked by hand: q(t) = 1 + 0.5·t + 1.5·t² at t = 10, 18, 26 ms:
+        // q0 = 1.00515, q1 = 1.009486, q2 = 1.014014; v1 = 0.004336/0.008 = 0.542,
+        // v2 = 0.004528/0.008 = 0.566; qdd = 2·(0.566 − 0.542)/0.016 = 3.0;
+        // qd = 0.566 + 3.0·0.004 = 0.578 = q'(0.026) = 0.5 + 3·0.026.
+        let mut est = FeedforwardEstimator::new(0.024);
+        let q = |x: f64| [x, 0.0, 0.0, 0.0, 0.0, 0.0];
+        assert_eq!(est.push(0.010, &q(1.00515)), ServoFeedforward::ZERO);
+        let two = est.push(0.018, &q(1.009486));
+        assert!((two.qd[0] - 0.542).abs() < 1e-9); // two targets: the backward difference
+        assert_eq!(two.qdd[0], 0.0);
+        let ff = est.push(0.026, &q(1.014014));
+        assert!((ff.qd[0] - 0.578).abs() < 1e-9, "{}", ff.qd[0]);
+        assert!((ff.qdd[0] - 3.0).abs() < 1e-6, "{}", ff.qdd[0]);
+        assert_eq!(ff.qd[1], 0.0);
+        // A second target for the same time replaces the newest (same estimate again).
+        let again = est.push(0.026, &q(1.014014));
+        assert_eq!(again, ff);
+        // A stop (the same target again): v2 = 0, no extrapolation across the kink.
+        let stop = est.push(0.034, &q(1.014014));
+        assert_eq!(stop, ServoFeedforward::ZERO);
+        // A gap longer than 24 ms restarts it: one target, nothing to difference.
+        est.push(0.042, &q(1.02));
+        assert_eq!(est.push(0.070, &q(1.03)), ServoFeedforward::ZERO);
+        // So does a timestamp going back (a new controller session) ...
+        est.push(0.072, &q(1.031));
+        assert_eq!(est.push(0.001, &q(1.032)), ServoFeedforward::ZERO);
+        // ... a non-finite input, and reset().
+        est.push(0.003, &q(1.033));
+        assert_eq!(est.push(f64::NAN, &q(1.034)), ServoFeedforward::ZERO);
+        est.push(0.005, &q(1.035));
+        est.reset();
+        assert_eq!(est.push(0.007, &q(1.036)), ServoFeedforward::ZERO);
+        assert!(est.push(0.009, &q(1.037)).qd[0] > 0.0);
     }
 }

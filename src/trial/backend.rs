@@ -149,8 +149,11 @@ pub(crate) fn start_emulator(
         // The program's watchdog counts virtual time; scale it so that it still allows the
         // real controller's 100 ms of *wall* time between command writes (at speedup 4, a
         // 25 ms stall of this process, e.g. under a parallel build, would otherwise stop it).
+        // The servo extrapolation bound likewise covers 3 cycles of *wall* time: at speedup 4
+        // each command is held for a burst of 4 cycles, and must be extrapolated through it.
         let map = RegisterMap {
             watchdog_hz: RegisterMap::default().watchdog_hz / f64::from(speedup.max(1)),
+            extrapolate_max_s: RegisterMap::default().extrapolate_max_s * f64::from(speedup.max(1)),
             ..RegisterMap::default()
         };
         let robot = connect(
