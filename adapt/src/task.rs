@@ -283,13 +283,16 @@ pub struct TaskConfig {
     pub handover_q_rad: Joints,
     /// r_grasp: a hand within this distance of the TCP may be grasping [m], > 0.
     pub grasp_radius_m: f64,
-    /// t_grasp: how long a hand must stay within r_grasp, without a break [s], > 0.
+    /// t_grasp: how long a hand must stay within r_grasp, without a break [s], in
+    /// (0, [`MAX_TASK_TIME_S`]].
     pub grasp_time_s: f64,
-    /// How long the robot presents before it returns the part [s], > t_grasp.
+    /// How long the robot presents before it returns the part [s], > t_grasp and
+    /// ≤ [`MAX_TASK_TIME_S`].
     pub present_timeout_s: f64,
-    /// Time for the gripper to close at the pick pose [s], ≥ 0.
+    /// Time for the gripper to close at the pick pose [s], in [0, [`MAX_TASK_TIME_S`]].
     pub grip_dwell_s: f64,
-    /// Time for the gripper to open before the release is confirmed [s], ≥ 0.
+    /// Time for the gripper to open before the release is confirmed [s], in
+    /// [0, [`MAX_TASK_TIME_S`]].
     pub release_dwell_s: f64,
 }
 
@@ -302,6 +305,10 @@ pub const IK_REFERENCE_Q_RAD: Joints = [
     -std::f64::consts::FRAC_PI_2,
     0.0,
 ];
+
+/// Longest `grasp_time_s`, `present_timeout_s`, `grip_dwell_s` and `release_dwell_s` [s]:
+/// 600 s, a whole shipped trial; longer would stall the task for the rest of it.
+pub const MAX_TASK_TIME_S: f64 = 600.0;
 
 /// UR5e joint position limit [rad]: ±2π.
 const JOINT_LIMIT_RAD: f64 = std::f64::consts::TAU;
@@ -340,6 +347,19 @@ impl TaskConfig {
         positive("grasp_radius_m", self.grasp_radius_m)?;
         positive("grasp_time_s", self.grasp_time_s)?;
         positive("present_timeout_s", self.present_timeout_s)?;
+        for (key, v) in [
+            ("grasp_time_s", self.grasp_time_s),
+            ("present_timeout_s", self.present_timeout_s),
+            ("grip_dwell_s", self.grip_dwell_s),
+            ("release_dwell_s", self.release_dwell_s),
+        ] {
+            if v > MAX_TASK_TIME_S {
+                return Err(invalid(
+                    key,
+                    format!("must be at most {MAX_TASK_TIME_S} s, got {v} s"),
+                ));
+            }
+        }
         if self.present_timeout_s <= self.grasp_time_s {
             return Err(invalid(
                 "present_timeout_s",

@@ -518,3 +518,40 @@ fn config_validation() {
     r.release_dwell_s = f64::NAN;
     assert!(TaskConfig::from_raw_with(&r, no_ik).is_err());
 }
+
+#[test]
+fn task_times_are_bounded_at_600_s_and_the_error_names_the_key() {
+    let no_ik = |_: &[f64; 6], _: &[f64; 6]| -> Option<[f64; 6]> { None };
+    let home = RawPose {
+        joints_rad: Some(cfg().home_q_rad),
+        position_m: None,
+        rotation_vector_rad: None,
+    };
+    type Field = fn(&mut RawTaskConfig) -> &mut f64;
+    let fields: [(&str, Field); 4] = [
+        ("grasp_time_s", |r| &mut r.grasp_time_s),
+        ("present_timeout_s", |r| &mut r.present_timeout_s),
+        ("grip_dwell_s", |r| &mut r.grip_dwell_s),
+        ("release_dwell_s", |r| &mut r.release_dwell_s),
+    ];
+    for (key, field) in fields {
+        // 1e20 s passed validation at a077dd5 (issue 10).
+        for bad in [600.5, 1e20] {
+            let mut r = raw(home.clone());
+            *field(&mut r) = bad;
+            if key == "grasp_time_s" {
+                r.present_timeout_s = 599.0; // keep present_timeout_s > grasp_time_s aside
+            }
+            let err = TaskConfig::from_raw_with(&r, no_ik)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains(&format!("`{key}`")) && err.contains("600"),
+                "{err}"
+            );
+        }
+    }
+    let mut r = raw(home);
+    r.present_timeout_s = 600.0;
+    assert!(TaskConfig::from_raw_with(&r, no_ik).is_ok());
+}

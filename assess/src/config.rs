@@ -35,7 +35,7 @@ pub struct FusionConfig {
     /// Torso yaw rate above which a reorientation is large [deg/s]; default 90.
     pub turn_yaw_rate_deg_s: f64,
     /// The yaw rate compares the current frame with the frame this many valid body frames
-    /// earlier; default 3.
+    /// earlier, in [1, [`MAX_FRAMES`]]; default 3.
     pub turn_lookback_frames: usize,
     /// τ: the fused score a raw state needs [-], in (0, 1]; default 0.7.
     pub tau: f64,
@@ -66,7 +66,8 @@ impl Default for FusionConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ConfirmationConfig {
-    /// M: the window of valid frames [frames]; default 15 (0.5 s at 30 fps). γ is a strict majority.
+    /// M: the window of valid frames [frames], in [1, [`MAX_FRAMES`]]; default 15 (0.5 s at
+    /// 30 fps). γ is a strict majority.
     pub window_frames: usize,
 }
 
@@ -152,6 +153,7 @@ pub struct HesitationConfig {
     /// v_max [m/s]; default 0.10.
     pub v_max_m_s: f64,
     /// The median covers samples of the last this many seconds [s]; default 10.
+    /// `median_horizon_s × window.max_rate_hz` must stay ≤ 1e7 samples (its buffer).
     pub median_horizon_s: f64,
     /// Until the samples' Δt add up to this, v_th = v_max [s]; default 1.
     pub min_sample_time_s: f64,
@@ -353,10 +355,13 @@ impl AssessConfig {
         check_weights("fusion.turn_weights", &f.turn_weights)?;
         unit_closed("fusion.min_confidence", f.min_confidence)?;
         positive("fusion.turn_yaw_rate_deg_s", f.turn_yaw_rate_deg_s)?;
-        if f.turn_lookback_frames == 0 {
+        if f.turn_lookback_frames == 0 || f.turn_lookback_frames > MAX_FRAMES {
             return Err(AssessError::invalid(
                 "fusion.turn_lookback_frames",
-                "must be ≥ 1",
+                format!(
+                    "must be in [1, {MAX_FRAMES}] (got {})",
+                    f.turn_lookback_frames
+                ),
             ));
         }
         if !(f.tau > 0.0 && f.tau <= 1.0) {
@@ -365,10 +370,11 @@ impl AssessConfig {
                 format!("τ must lie in (0, 1] (got {})", f.tau),
             ));
         }
-        if self.confirmation.window_frames == 0 {
+        let m = self.confirmation.window_frames;
+        if m == 0 || m > MAX_FRAMES {
             return Err(AssessError::invalid(
                 "confirmation.window_frames",
-                "M must be ≥ 1 (got 0)",
+                format!("M must be in [1, {MAX_FRAMES}] (got {m})"),
             ));
         }
         positive(
@@ -457,6 +463,12 @@ impl AssessConfig {
                 "horizon_s × max_rate_hz must stay ≤ 1e7 frames",
             ));
         }
+        if h.median_horizon_s * self.window.max_rate_hz > 10_000_000.0 {
+            return Err(AssessError::invalid(
+                "hesitation.median_horizon_s",
+                "median_horizon_s × window.max_rate_hz must stay ≤ 1e7 samples",
+            ));
+        }
         if h.min_duration_s >= self.window.horizon_s {
             return Err(AssessError::invalid(
                 "hesitation.min_duration_s",
@@ -474,6 +486,11 @@ impl AssessConfig {
         Ok(())
     }
 }
+
+/// The most frames `confirmation.window_frames` (M) and `fusion.turn_lookback_frames` may be:
+/// 10 000, over 40 s at the 240 Hz `window.max_rate_hz` default. Each sizes a buffer of the
+/// assessor; the bound keeps a typo from aborting the process allocating it (issue 10).
+pub const MAX_FRAMES: usize = 10_000;
 
 /// Component names as used in config keys and logs, in component order.
 pub const COMPONENT_KEYS: [&str; 5] = ["aed", "tid", "icd", "asd", "ohd"];
@@ -538,5 +555,38 @@ fn unit_closed(key: &str, v: f64) -> Result<()> {
             key,
             format!("must lie in [0, 1] (got {v})"),
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_that_become_allocations_are_bounded_and_the_error_names_the_key() {
+        // Each of these sizes a buffer in `Assessor::new`; at a077dd5 a huge value passed
+        // validation and then aborted the process allocating it (issue 10).
+        type Set = fn(&mut AssessConfig);
+        let cases: [(&str, Set); 3] = [
+            ("confirmation.window_frames", |c| {
+                c.confirmation.window_frames = 10_001
+            }),
+            ("fusion.turn_lookback_frames", |c| {
+                c.fusion.turn_lookback_frames = 10_001
+            }),
+            ("hesitation.median_horizon_s", |c| {
+                c.hesitation.median_horizon_s = 1e20
+            }),
+        ];
+        for (key, set) in cases {
+            let mut cfg = AssessConfig::default();
+            set(&mut cfg);
+            let e = cfg.validate().unwrap_err().to_string();
+            assert!(e.contains(key), "{key}: {e}");
+        }
+        let mut cfg = AssessConfig::default();
+        cfg.confirmation.window_frames = 10_000;
+        cfg.fusion.turn_lookback_frames = 10_000;
+        assert!(cfg.validate().is_ok());
     }
 }

@@ -70,7 +70,7 @@ pub use assessor::Assessor;
 pub use config::{
     AssessConfig, BaselineMode, COMPONENT_KEYS, ComponentValues, CompositeConfig,
     ConfirmationConfig, CueWeights, DemandConfig, DominantConfig, FusionConfig, HesitationConfig,
-    OneEuroConfig, SwitchingConfig, WindowConfig,
+    MAX_FRAMES, OneEuroConfig, SwitchingConfig, WindowConfig,
 };
 pub use cue::{BodyCue, CueFrame, Hand, HandCue, HeadCue, RobotContext};
 pub use error::{AssessError, Result};

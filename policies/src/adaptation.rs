@@ -113,13 +113,20 @@ pub struct TaskContext {
     pub assembly_dwell_s: f64,
 }
 
+/// The longest start delay, minimum approach duration and assembly deferral a rule table may
+/// give \[s\]: 600 s, the shipped trial's whole length (`config/trial.toml`'s `max_duration_s`).
+/// A longer hold would never let a handover happen in a trial; the bound also keeps every timing
+/// convertible to a `std::time::Duration` (issue 10: 1e20 s panicked the trial).
+pub const MAX_TIMING_S: f64 = 600.0;
+
 /// Handover timing and gating parameters.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct HandoverTiming {
-    /// Hold this long after the part is gripped before the approach may start \[s\], ≥ 0
-    /// (adapt's `start_delay_s`).
+    /// Hold this long after the part is gripped before the approach may start \[s\], in
+    /// [0, [`MAX_TIMING_S`]] (adapt's `start_delay_s`).
     pub start_delay_s: f64,
-    /// The approach (pick pose → handover pose) takes at least this long \[s\], ≥ 0; 0 means no
+    /// The approach (pick pose → handover pose) takes at least this long \[s\], in
+    /// [0, [`MAX_TIMING_S`]]; 0 means no
     /// lower bound (the motion generator's time-optimal duration). The binary maps it onto a
     /// speed cap for the approach segment.
     pub min_approach_duration_s: f64,
@@ -136,7 +143,7 @@ pub struct HandoverTiming {
     /// instruction area.
     pub hold_while_in_instruction_area: bool,
     /// Defer the approach while the operator's assembly dwell lasts, for at most this long per
-    /// handover \[s\], ≥ 0; 0 disables the deferral.
+    /// handover \[s\], in [0, [`MAX_TIMING_S`]]; 0 disables the deferral.
     pub max_assembly_deferral_s: f64,
 }
 

@@ -18,9 +18,9 @@
 //! The six rules `none`, `AED`, `TID`, `ICD`, `ASD_ctx` and `OHD` must all be present; unknown
 //! keys are errors that name the key. Fields: `rationale` (required, non-empty), `speed_scale`,
 //! `acceleration_scale`, `jerk_scale` (in (0, 1]), `start_delay_s`, `min_approach_duration_s`,
-//! `max_assembly_deferral_s` (finite, ≥ 0), and the flags `wait_for_attention`,
-//! `present_requires_collaboration_attention`, `hold_while_in_instruction_area`. The meaning
-//! of each is on [`HandoverTiming`].
+//! `max_assembly_deferral_s` (in [0, [`MAX_TIMING_S`]] = [0, 600] s), and the flags
+//! `wait_for_attention`, `present_requires_collaboration_attention`,
+//! `hold_while_in_instruction_area`. The meaning of each is on [`HandoverTiming`].
 //!
 //! # Rate limiting
 //! Let A be the active rule's indicator (initially "none", adopted at the first decision) and
@@ -46,8 +46,8 @@ use serde::Deserialize;
 
 use crate::adaptation::slew;
 use crate::{
-    Adaptation, Gate, HandoverTiming, HoldReason, Policy, PolicyError, Reason, Result, Scale,
-    TaskContext, TaskPhase, indicator_from_key, indicator_key,
+    Adaptation, Gate, HandoverTiming, HoldReason, MAX_TIMING_S, Policy, PolicyError, Reason,
+    Result, Scale, TaskContext, TaskPhase, indicator_from_key, indicator_key,
 };
 
 /// The shipped default rule table, `config/policy-adaptive.toml`, embedded at build time.
@@ -231,7 +231,8 @@ impl RawRule {
             None => Ok(d),
         };
         let duration = |field: &str, v: Option<f64>, d: f64| match v {
-            Some(x) => non_negative(&k(field), x).map(|()| x),
+            Some(x) if (0.0..=MAX_TIMING_S).contains(&x) => Ok(x),
+            Some(x) => Err(PolicyError::invalid(k(field), "must be in [0, 600] s", x)),
             None => Ok(d),
         };
         let b = &base.timing;
@@ -545,5 +546,44 @@ impl Policy for AdaptivePolicy {
 
     fn name(&self) -> &'static str {
         "adaptive"
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A table whose six rules only have rationales, plus `none_fields` in `rules.none`.
+    fn table_with(none_fields: &str) -> String {
+        let mut t = String::from(
+            "[limits]\nmin_hold_s = 5.0\nswitch_margin = 0.0\nmax_scale_rate_per_s = 1.0\n\
+             max_timing_rate_s_per_s = 1.0\n[rules.none]\nrationale = \"n\"\n",
+        );
+        t.push_str(none_fields);
+        for k in ["AED", "TID", "ICD", "ASD_ctx", "OHD"] {
+            t.push_str(&format!("\n[rules.{k}]\nrationale = \"{k}\"\n"));
+        }
+        t
+    }
+
+    #[test]
+    fn timings_are_bounded_at_600_s_and_the_error_names_the_key() {
+        // 1e20 s passed validation and then panicked the trial when it became a Duration
+        // (issue 10); the bound is 600 s, inclusive.
+        for field in [
+            "start_delay_s",
+            "min_approach_duration_s",
+            "max_assembly_deferral_s",
+        ] {
+            let ok = RuleTable::from_toml_str(&table_with(&format!("{field} = 600.0\n")));
+            assert!(ok.is_ok(), "{field} = 600: {ok:?}");
+            for bad in ["600.001", "1e20"] {
+                let e = RuleTable::from_toml_str(&table_with(&format!("{field} = {bad}\n")))
+                    .unwrap_err()
+                    .to_string();
+                assert!(e.contains(&format!("`rules.none.{field}`")), "{e}");
+                assert!(e.contains("600"), "{e}");
+            }
+        }
     }
 }

@@ -70,13 +70,13 @@ mod policy;
 pub mod schedule;
 
 pub use adaptation::{
-    Adaptation, Gate, HandoverTiming, HoldReason, Reason, Scale, TaskContext, TaskPhase,
-    indicator_from_key, indicator_key,
+    Adaptation, Gate, HandoverTiming, HoldReason, MAX_TIMING_S, Reason, Scale, TaskContext,
+    TaskPhase, indicator_from_key, indicator_key,
 };
 pub use adaptive::{AdaptivePolicy, Limits, Rule, RuleTable, SHIPPED_TOML};
 pub use error::{PolicyError, Result};
 pub use policy::{FixedPolicy, Policy, PolicyKind};
 pub use schedule::{
-    Condition, ExperimentDesign, Schedule, ScheduledTrial, Session, SplitMix64, Treatment,
-    williams_square,
+    Condition, ExperimentDesign, MAX_PARTICIPANTS, Schedule, ScheduledTrial, Session, SplitMix64,
+    Treatment, williams_square,
 };

@@ -160,10 +160,14 @@ pub struct Treatment {
     pub policy: String,
 }
 
+/// The most participants a design may have: 1000, far more than a lab study runs; it bounds
+/// the schedule's allocation (issue 10: a huge count passed and aborted the process).
+pub const MAX_PARTICIPANTS: usize = 1000;
+
 /// What to schedule.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ExperimentDesign {
-    /// Number of participants (≥ 1); they are named `P01`, `P02`, ….
+    /// Number of participants, in [1, [`MAX_PARTICIPANTS`]]; they are named `P01`, `P02`, ….
     pub participants: usize,
     /// The conditions (non-empty, no repeats).
     pub conditions: Vec<Condition>,
@@ -221,6 +225,12 @@ impl ExperimentDesign {
         let invalid = |reason: String| Err(PolicyError::InvalidDesign { reason });
         if self.participants == 0 {
             return invalid("no participants".into());
+        }
+        if self.participants > MAX_PARTICIPANTS {
+            return invalid(format!(
+                "participants must be at most {MAX_PARTICIPANTS}, got {}",
+                self.participants
+            ));
         }
         if self.conditions.is_empty() {
             return invalid("no conditions".into());
@@ -307,6 +317,22 @@ impl Schedule {
 mod tests {
     use super::*;
     use std::collections::HashMap;
+
+    #[test]
+    fn participants_are_bounded_at_1000() {
+        let design = |participants| ExperimentDesign {
+            participants,
+            conditions: vec![Condition::L1],
+            policies: vec!["adaptive".into(), "fixed".into()],
+            seed: 1,
+        };
+        assert_eq!(design(1000).schedule().unwrap().sessions.len(), 1000);
+        // usize::MAX passed at a077dd5 and panicked allocating the sessions (issue 10).
+        for bad in [1001, usize::MAX] {
+            let e = design(bad).schedule().unwrap_err().to_string();
+            assert!(e.contains("participants must be at most 1000"), "{e}");
+        }
+    }
 
     /// Checks the Williams properties of `rows` over `0..n`: Latin rows, every column holding
     /// each symbol `reps` times, every ordered pair adjacent `reps` times.

@@ -5,6 +5,15 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 use serde::Deserialize;
 
+/// Highest `cue_rate_hz` [Hz]: the fastest camera mode the front-end runs (and 4× the
+/// assessment's 30 Hz design rate).
+pub(crate) const MAX_CUE_RATE_HZ: f64 = 120.0;
+/// Longest `max_duration_s` [s]: one hour, six times the shipped 600 s; it bounds the trial's
+/// cycle count and log size.
+pub(crate) const MAX_DURATION_S: f64 = 3600.0;
+/// Longest `lead_time_s` [s]: 600 s, the shipped trial's whole length.
+pub(crate) const MAX_LEAD_TIME_S: f64 = 600.0;
+
 /// The trial configuration file (every key is documented in `config/trial.toml`).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -80,11 +89,20 @@ impl TrialConfig {
             *a = base_dir.join(&*a);
         }
         anyhow::ensure!(
-            cfg.cue_rate_hz > 0.0 && cfg.cue_rate_hz <= 120.0,
-            "cue_rate_hz must be in (0, 120]"
+            cfg.cue_rate_hz > 0.0 && cfg.cue_rate_hz <= MAX_CUE_RATE_HZ,
+            "cue_rate_hz must be in (0, {MAX_CUE_RATE_HZ}] Hz, got {}",
+            cfg.cue_rate_hz
         );
-        anyhow::ensure!(cfg.max_duration_s > 0.0, "max_duration_s must be > 0");
-        anyhow::ensure!(cfg.lead_time_s >= 0.0, "lead_time_s must be >= 0");
+        anyhow::ensure!(
+            cfg.max_duration_s > 0.0 && cfg.max_duration_s <= MAX_DURATION_S,
+            "max_duration_s must be in (0, {MAX_DURATION_S}] s, got {}",
+            cfg.max_duration_s
+        );
+        anyhow::ensure!(
+            (0.0..=MAX_LEAD_TIME_S).contains(&cfg.lead_time_s),
+            "lead_time_s must be in [0, {MAX_LEAD_TIME_S}] s, got {}",
+            cfg.lead_time_s
+        );
         anyhow::ensure!(
             cfg.frame.robot_base_origin_m.iter().all(|v| v.is_finite())
                 && cfg.frame.robot_base_yaw_deg.is_finite(),
@@ -127,5 +145,35 @@ mod tests {
         };
         let q = rotated.to_base(rotated.to_workspace([0.3, -0.2, 0.1]));
         assert!((q[0] - 0.3).abs() < 1e-12 && (q[1] + 0.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn durations_are_bounded_and_the_error_names_the_key() {
+        let dir = Path::new("/cfg");
+        let with = |key: &str, value: &str| {
+            let line = SHIPPED_TOML
+                .lines()
+                .find(|l| l.starts_with(&format!("{key} = ")))
+                .unwrap_or_else(|| panic!("{key} is in the shipped config"));
+            TrialConfig::from_toml_str(
+                &SHIPPED_TOML.replace(line, &format!("{key} = {value}")),
+                dir,
+            )
+        };
+        // At the bounds: accepted.
+        assert!(with("max_duration_s", "3600.0").is_ok());
+        assert!(with("lead_time_s", "600.0").is_ok());
+        // Past them (1e20 passed validation at a077dd5): refused, naming the key and bound.
+        for (key, bad, bound) in [
+            ("max_duration_s", "3600.5", "3600"),
+            ("max_duration_s", "1e20", "3600"),
+            ("max_duration_s", "nan", "3600"),
+            ("lead_time_s", "600.5", "600"),
+            ("lead_time_s", "1e20", "600"),
+            ("cue_rate_hz", "1e20", "120"),
+        ] {
+            let e = format!("{:#}", with(key, bad).unwrap_err());
+            assert!(e.contains(key) && e.contains(bound), "{key} = {bad}: {e}");
+        }
     }
 }

@@ -330,6 +330,45 @@ mod tests {
     }
 
     #[test]
+    fn a_policy_delay_too_long_for_a_duration_is_refused_not_a_panic() {
+        // Issue 10: `rules.none.start_delay_s = 1e20` passed validation, then panicked the
+        // trial ("cannot convert float seconds to Duration"), exit 101 and no summary.
+        let tmp = tempfile::tempdir().unwrap();
+        let table = tmp.path().join("policy.toml");
+        let shipped = policies::SHIPPED_TOML;
+        let at = shipped.find("[rules.none]").unwrap() + "[rules.none]".len();
+        let text = format!("{}\nstart_delay_s = 1e20{}", &shipped[..at], &shipped[at..]);
+        let text = text.replacen("start_delay_s = 0.5", "", 1);
+        std::fs::write(&table, text).unwrap();
+        let mut spec = runtime::test_spec(operator::Level::L1, 1, 2.0);
+        spec.config.policy_table = table;
+        let out = tmp.path().join("run");
+        let e = format!("{:#}", run_simulated(&spec, &out, false).unwrap_err());
+        assert!(e.contains("rules.none.start_delay_s"), "{e}");
+    }
+
+    #[test]
+    fn motion_adaptation_bounds_timings_and_fails_closed_instead_of_panicking() {
+        use std::time::Duration;
+        let max = Duration::from_secs(600);
+        let mut a = policies::Adaptation::NOMINAL;
+        for (s, want) in [
+            (1.5, Duration::from_millis(1500)),
+            (-3.0, Duration::ZERO),
+            (f64::NEG_INFINITY, Duration::ZERO),
+            (601.0, max),
+            (1e20, max),
+            (f64::INFINITY, max),
+            (f64::NAN, max),
+        ] {
+            a.timing.start_delay_s = s;
+            a.timing.min_approach_duration_s = s;
+            let m = runtime::motion_adaptation(&a);
+            assert_eq!((m.start_delay, m.min_approach_duration), (want, want), "{s}");
+        }
+    }
+
+    #[test]
     fn cue_sources_from_the_command_line() {
         let cam = CameraArgs::default();
         assert_eq!(

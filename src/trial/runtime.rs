@@ -104,13 +104,22 @@ fn phase_name(p: Phase) -> &'static str {
 /// speed scale → speed scale; smoothness = min(acceleration scale, √jerk scale) (adapt scales
 /// acceleration × s and jerk × s²); start delay; minimum approach duration; `gates_start()` →
 /// wait-for-attention with `gate.clear` as "attention on the robot".
-fn motion_adaptation(a: &Adaptation) -> MotionAdaptation {
+///
+/// The rule table bounds the timings to [0, `policies::MAX_TIMING_S`]; a timing outside that
+/// (built in code, or NaN) cannot panic here: it fails closed to the longest delay and the
+/// slowest approach, `MAX_TIMING_S` (issue 10).
+pub(super) fn motion_adaptation(a: &Adaptation) -> MotionAdaptation {
     let smooth = a.acceleration_scale.get().min(a.jerk_scale.get().sqrt());
+    let max = Duration::from_secs_f64(policies::MAX_TIMING_S);
+    let bounded = |s: f64| match s {
+        s if s <= 0.0 => Duration::ZERO,
+        s => Duration::try_from_secs_f64(s).map_or(max, |d| d.min(max)),
+    };
     MotionAdaptation {
         speed_scale: SpeedScale::new(a.speed_scale.get()).unwrap_or(SpeedScale::ONE),
         smoothness_scale: SmoothnessScale::new(smooth).unwrap_or(SmoothnessScale::ONE),
-        start_delay: Duration::from_secs_f64(a.timing.start_delay_s.max(0.0)),
-        min_approach_duration: Duration::from_secs_f64(a.timing.min_approach_duration_s.max(0.0)),
+        start_delay: bounded(a.timing.start_delay_s),
+        min_approach_duration: bounded(a.timing.min_approach_duration_s),
         wait_for_attention: a.timing.gates_start(),
         attention_on_robot: a.gate.clear,
     }
