@@ -643,6 +643,31 @@ impl RtdeClient {
         self.try_recv(out)
     }
 
+    /// Copies the newest received sample into `out` without consuming it or any other (the
+    /// next [`RtdeClient::try_recv`], [`RtdeClient::try_latest`] or [`RtdeClient::recv`]
+    /// returns what it would have returned anyway). `Ok(None)` before the first sample. Never
+    /// blocks, never allocates.
+    pub fn peek_latest(&self, out: &mut OutputBuffer) -> Result<Option<SampleInfo>> {
+        let ring = lock(&self.shared.ring);
+        let cap = ring.slots.len() as u64;
+        let Some(seq) = ring.head.checked_sub(1).filter(|_| cap > 0) else {
+            return Ok(None);
+        };
+        let i = usize::try_from(seq % cap).unwrap_or(0);
+        let (Some(src), Some(&epoch)) = (ring.slots.get(i), ring.epochs.get(i)) else {
+            return Err(RobotIoError::Malformed {
+                reason: "ring index out of range",
+            });
+        };
+        out.payload.copy_from_slice(src);
+        out.info = SampleInfo {
+            seq,
+            epoch,
+            dropped: 0,
+        };
+        Ok(Some(out.info))
+    }
+
     /// Waits for the next sample and copies it into `out`. Allocates nothing.
     pub async fn recv(&mut self, out: &mut OutputBuffer) -> Result<SampleInfo> {
         let shared = self.shared.clone();

@@ -1464,9 +1464,9 @@ async fn serve_script(
     }
 }
 
-/// The command the emulator's SimBackend would pass to its robot for these registers when
-/// they arrive (for tools that inspect the register protocol): a servo target before its
-/// extrapolation, see [`crate::script::DecodedCommand`] for the feedforward.
+/// The command these registers hold, as the emulator's SimBackend decodes it (for tools that
+/// inspect the register protocol): a servo target as written, before the program's
+/// extrapolation ([`RegisterMap::decode`] also gives the feedforward).
 pub fn decode_registers(inputs: &InputRegisters, map: &RegisterMap) -> Option<JointCommand> {
     let ib = usize::from(map.int_base);
     let db = usize::from(map.double_base);

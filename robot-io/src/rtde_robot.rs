@@ -123,6 +123,8 @@ pub struct RtdeRobot {
     program: Option<ProgramSender>,
     /// Controller timestamp of the last state `read_state`/`wait_state` returned \[s\].
     read_ts: f64,
+    /// The newest received sample, peeked at by `send` (not consumed).
+    peek: OutputBuffer,
     /// Feedforward of the servo commands ([`Robot::send`]).
     feedforward: FeedforwardEstimator,
 }
@@ -134,6 +136,7 @@ impl RtdeRobot {
         cfg.registers.validate()?;
         let client = RtdeClient::connect(cfg.client_config()).await?;
         let buf = client.output_buffer();
+        let peek = client.output_buffer();
         let mut slots = [FieldSlot {
             offset: 0,
             ty: crate::codec::FieldType::Double,
@@ -172,6 +175,7 @@ impl RtdeRobot {
             received: false,
             program,
             read_ts: f64::NAN,
+            peek,
             feedforward: FeedforwardEstimator::new(cfg.registers.feedforward_max_gap_s()),
         })
     }
@@ -282,17 +286,17 @@ impl RtdeRobot {
 }
 
 impl RtdeRobot {
-    /// The controller timestamp of the newest sample received \[s\]: takes it from the
-    /// client (the next `read_state` returns it; one that fails to decode is dropped).
+    /// The controller timestamp of the newest sample received \[s\] (peeked at: the next
+    /// `read_state` or `wait_state` is unaffected); the last one decoded if none can be read.
     /// Never blocks, allocates nothing.
     fn newest_timestamp(&mut self) -> f64 {
-        if let Ok(Some(_)) = self.client.try_latest(&mut self.buf) {
-            let before = self.last;
-            if self.decode().is_err() {
-                self.last = before;
-            }
+        let [ts, ..] = self.slots.0;
+        match self.client.peek_latest(&mut self.peek) {
+            Ok(Some(_)) => ts
+                .read_f64(self.peek.payload())
+                .unwrap_or(self.last.timestamp_s),
+            _ => self.last.timestamp_s,
         }
-        self.last.timestamp_s
     }
 }
 
@@ -347,11 +351,9 @@ impl Robot for RtdeRobot {
     /// parabola through the last three servo targets at those times
     /// ([`FeedforwardEstimator`], restarted by a non-servo command, a gap longer than
     /// [`RegisterMap::feedforward_max_gap_s`] or a timestamp going back). Its age is the newest
-    /// controller timestamp the client has received when it is sent minus the timestamp of
-    /// that read (≥ 0): the robot's next cycle is one cycle after the newest sample, and the
-    /// target was meant for the cycle after the read. To know the newest timestamp, `send`
-    /// takes the newest received sample (the next `read_state` returns it); a sample that
-    /// fails to decode is dropped there.
+    /// controller timestamp the client has received when it is sent (peeked at, not
+    /// consumed) minus the timestamp of that read (≥ 0): the robot's next cycle is one cycle
+    /// after the newest sample, and the target was meant for the cycle after the read.
     fn send(&mut self, cmd: &JointCommand) -> Result<()> {
         self.seq = self.seq.wrapping_add(1);
         let ff = match cmd {
