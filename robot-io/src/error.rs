@@ -197,6 +197,23 @@ pub enum RobotIoError {
         /// Why it is invalid.
         reason: &'static str,
     },
+    // --- separation geometry and parameters ---
+    /// An arm or body model size is invalid (`robot_io::geometry`).
+    #[error("invalid geometry setting `{field}`: {reason}")]
+    InvalidGeometry {
+        /// The setting.
+        field: &'static str,
+        /// Why it is invalid.
+        reason: &'static str,
+    },
+    /// A protective separation distance parameter is invalid (`robot_io::separation`).
+    #[error("invalid separation setting `{field}`: {reason}")]
+    InvalidSeparation {
+        /// The setting.
+        field: &'static str,
+        /// Why it is invalid.
+        reason: &'static str,
+    },
     /// A command the simulated controller refuses (non-finite values, or servoj parameters
     /// outside the ranges UR's controller accepts).
     #[error("invalid command: {reason}")]

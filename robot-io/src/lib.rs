@@ -14,6 +14,11 @@
 //! - [`script`]: our URScript control program and its register protocol; [`DashboardClient`].
 //! - [`trace`]: UR `record.py` and ur_rtde CSV readers and writers, de-duplication, gap reports.
 //! - [`kinematics`]: UR5e forward kinematics and Jacobians, shared with `adapt` and `safety`.
+//! - [`geometry`]: the arm, gripper and carried part as capsules ([`geometry::ArmModel`]),
+//!   the operator's tracked body ([`geometry::HumanBody`], [`geometry::BodyModel`]) and exact
+//!   segment and capsule distances; [`separation`]: ISO/TS 15066's protective separation
+//!   distance. Both are shared by the planner (`adapt`) and the supervisor (`safety`), which
+//!   share formulas, never code paths.
 //!
 //! # Example
 //! A servoJ command on the simulated UR5e, one 2 ms cycle at a time:
@@ -59,6 +64,10 @@ pub mod kinematics;
 pub use kinematics::{
     ControlPoint, ControlPointState, ControlPoints, flange_pose, link_frames, tcp_pose,
 };
+
+// --- separation monitoring: capsule geometry and ISO/TS 15066's S_p (used by adapt and safety) ---
+pub mod geometry;
+pub mod separation;
 
 // --- simulation and traces: SimRobot, ReplayRobot, trace readers/writers ---
 pub mod replay;

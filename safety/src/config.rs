@@ -7,6 +7,8 @@
 use std::f64::consts::{PI, TAU};
 
 use robot_io::Joints;
+use robot_io::geometry::{ArmModel, BodyModel};
+pub use robot_io::separation::SeparationParams;
 
 use crate::error::{Result, SafetyError};
 
@@ -262,100 +264,6 @@ impl WorkspaceBox {
     }
 }
 
-/// Parameters of the protective separation distance of ISO/TS 15066 (see
-/// [`crate::separation`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SeparationParams {
-    head_speed_m_s: f64,
-    hand_speed_m_s: f64,
-    reaction_time_s: f64,
-    intrusion_m: f64,
-    human_uncertainty_m: f64,
-    robot_uncertainty_m: f64,
-}
-
-impl SeparationParams {
-    /// - `head_speed_m_s` v_h for the head [m/s] (> 0);
-    /// - `hand_speed_m_s` v_h for the hands [m/s] (> 0);
-    /// - `reaction_time_s` T_r, from a change of the human's position to the stop command [s]
-    ///   (≥ 0; the perception age of each cycle is added to it);
-    /// - `intrusion_m` C [m], `human_uncertainty_m` Z_d [m], `robot_uncertainty_m` Z_r [m]
-    ///   (all ≥ 0).
-    pub fn new(
-        head_speed_m_s: f64,
-        hand_speed_m_s: f64,
-        reaction_time_s: f64,
-        intrusion_m: f64,
-        human_uncertainty_m: f64,
-        robot_uncertainty_m: f64,
-    ) -> Result<Self> {
-        Ok(Self {
-            head_speed_m_s: finite_positive("separation.head_speed_m_s", head_speed_m_s)?,
-            hand_speed_m_s: finite_positive("separation.hand_speed_m_s", hand_speed_m_s)?,
-            reaction_time_s: finite_non_negative("separation.reaction_time_s", reaction_time_s)?,
-            intrusion_m: finite_non_negative("separation.intrusion_m", intrusion_m)?,
-            human_uncertainty_m: finite_non_negative(
-                "separation.human_uncertainty_m",
-                human_uncertainty_m,
-            )?,
-            robot_uncertainty_m: finite_non_negative(
-                "separation.robot_uncertainty_m",
-                robot_uncertainty_m,
-            )?,
-        })
-    }
-
-    /// Defaults for the handover cell:
-    /// - v_h = 1.6 m/s for the head (walking) and 2.0 m/s for the hands (arm reach), as in
-    ///   ISO 13855;
-    /// - T_r = 0.1 s: one 2 ms control cycle, the RTDE round trip and a margin for the pose
-    ///   pipeline's processing; the camera frame's age is added per cycle;
-    /// - C = 0.10 m: the fingers beyond the tracked hand keypoint;
-    /// - Z_d = 0.05 m: keypoint depth uncertainty of the camera;
-    /// - Z_r = 0.06 m: link radius and tool around the monitored DH points, plus the
-    ///   position uncertainty of the arm.
-    pub fn handover_default() -> Self {
-        Self {
-            head_speed_m_s: 1.6,
-            hand_speed_m_s: 2.0,
-            reaction_time_s: 0.1,
-            intrusion_m: 0.10,
-            human_uncertainty_m: 0.05,
-            robot_uncertainty_m: 0.06,
-        }
-    }
-
-    /// v_h for the head [m/s].
-    pub fn head_speed_m_s(&self) -> f64 {
-        self.head_speed_m_s
-    }
-
-    /// v_h for the hands [m/s].
-    pub fn hand_speed_m_s(&self) -> f64 {
-        self.hand_speed_m_s
-    }
-
-    /// T_r [s].
-    pub fn reaction_time_s(&self) -> f64 {
-        self.reaction_time_s
-    }
-
-    /// C [m].
-    pub fn intrusion_m(&self) -> f64 {
-        self.intrusion_m
-    }
-
-    /// Z_d [m].
-    pub fn human_uncertainty_m(&self) -> f64 {
-        self.human_uncertainty_m
-    }
-
-    /// Z_r [m].
-    pub fn robot_uncertainty_m(&self) -> f64 {
-        self.robot_uncertainty_m
-    }
-}
-
 /// Staleness thresholds for perception [s] and the robot state [cycles].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StalenessLimits {
@@ -436,8 +344,12 @@ pub struct SupervisorConfig {
     pub stale_perception_scale: SpeedScale,
     /// Box the TCP, wrist and elbow must stay in [m].
     pub workspace: WorkspaceBox,
-    /// Protective separation distance parameters.
+    /// Protective separation distance parameters (SAF-REQ-007).
     pub separation: SeparationParams,
+    /// The arm, gripper and carried part as capsules (SAF-REQ-007).
+    pub arm: ArmModel,
+    /// The operator's body sizes (SAF-REQ-007).
+    pub body: BodyModel,
     /// Perception and robot-state staleness thresholds.
     pub staleness: StalenessLimits,
 }
@@ -451,7 +363,10 @@ impl SupervisorConfig {
     ///   the tool stays under 140 N even if separation monitoring misses it;
     /// - speed ×0.25 while perception is stale;
     /// - workspace [`WorkspaceBox::ur5e_table`]; separation
-    ///   [`SeparationParams::handover_default`]; staleness 0.2 s / 1 s / 3 cycles.
+    ///   [`SeparationParams::handover_default`] (Z_r = 0.02 m: the robot's position
+    ///   uncertainty; the link sizes are in the capsules), from the capsules of
+    ///   [`ArmModel::ur5e_gripper`] to the operator's [`BodyModel::default_adult`];
+    ///   staleness 0.2 s / 1 s / 3 cycles.
     pub fn ur5e() -> Self {
         Self {
             cycle: CyclePeriod::ur5e(),
@@ -462,6 +377,8 @@ impl SupervisorConfig {
             stale_perception_scale: SpeedScale(0.25),
             workspace: WorkspaceBox::ur5e_table(),
             separation: SeparationParams::handover_default(),
+            arm: ArmModel::ur5e_gripper(),
+            body: BodyModel::default_adult(),
             staleness: StalenessLimits::issue_default(),
         }
     }

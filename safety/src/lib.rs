@@ -2,7 +2,7 @@
 //!
 //! [`Supervisor<R: Robot>`](Supervisor) owns the robot and is the only path to
 //! `Robot::send`: [`Supervisor::step`] judges each command against the limits, the latest
-//! robot state and a [`WorldView`] (tracked human points, perception age, whether a
+//! robot state and a [`WorldView`] (the operator's tracked body, perception age, whether a
 //! collaboration period C(t) is active), and sends it unchanged, scaled down, or replaced by
 //! a stop. Commands are sent only as a [`SafeCommand`], which only the supervisor can build;
 //! the robot cannot be reached mutably from outside, and its state is read through
@@ -16,8 +16,13 @@
 //! - [`Verdict`]: `Passed`, `Reduced { scale, violation }`, `Stopped { violation }`,
 //!   `Halted { violation }`; each [`Violation`] names its [`Requirement`];
 //! - [`Counters`]: verdicts per reaction and per requirement;
-//! - [`separation::protective_distance_m`]: ISO/TS 15066's S_p;
-//! - [`points::arm_points`]: TCP, wrist and elbow from UR5e forward kinematics.
+//! - [`separation::protective_distance_m`]: ISO/TS 15066's S_p (the formula and
+//!   [`SeparationParams`] are `robot_io::separation`'s, shared with the planner);
+//! - separation geometry from `robot_io::geometry`, also shared with the planner: the arm,
+//!   gripper and carried part as capsules ([`ArmModel`], [`ArmLink`]) and the operator's body
+//!   ([`HumanBody`], [`BodyModel`], [`BodyPart`]);
+//! - [`points::arm_points`]: TCP, wrist and elbow from UR5e forward kinematics (the workspace
+//!   box and the TCP speed).
 //!
 //! # Reactions
 //! - **pass**: sent unchanged;
@@ -47,7 +52,7 @@
 //! | SAF-REQ-004 | joint acceleration (servoJ: change of implied velocity / 2 ms; speedJ: `acc`) | π rad/s² | reduce (clamp); stop if no scale meets it | `saf_req_004_joint_acceleration_limit` |
 //! | SAF-REQ-002 | joint positions of the target and of the stopping configuration | ±2π rad − 0.05 rad margin | stop | `saf_req_002_joint_position_limits` |
 //! | SAF-REQ-006 | TCP, wrist and elbow at the target and stopping configuration inside the workspace box | x, y ∈ [−1, 1] m, z ∈ [0.02, 1.3] m | stop | `saf_req_006_workspace_box` |
-//! | SAF-REQ-007 | every tracked human point at least S_p from TCP, wrist and elbow (now and at the stopping configuration) | S_p = v_h(T_age + T_r + T_s) + v_r T_r + v_r T_s/2 + C + Z_d + Z_r | stop | `saf_req_007_protective_separation`, `saf_req_007_fault_injection_hand_during_approach` |
+//! | SAF-REQ-007 | every tracked body part (head sphere, hand points, torso capsule) at least S_p from the surface of every arm capsule (shoulder, upper arm, elbow, forearm, three wrists, gripper, carried part), at the measured joints and at the stopping configuration; the violation names the part and the nearest link | S_p = v_h(T_age + T_r + T_s) + v_r T_r + v_r T_s/2 + C + Z_d + Z_r; v_h 2.0 m/s hands, 1.6 m/s head and torso; C 0.1, Z_d 0.05, Z_r 0.02 m | stop | `saf_req_007_protective_separation`, `saf_req_007_hand_at_each_link_surface_stops_at_rest`, `saf_req_007_hand_at_each_link_surface_stops_in_motion`, `saf_req_007_torso_at_each_link_surface_stops_at_rest`, `saf_req_007_torso_at_each_link_surface_stops_in_motion`, `saf_req_007_default_torso_and_head_radii_count`, `saf_req_007_fault_injection_hand_during_approach` |
 //! | SAF-REQ-011 | a latched fault clears only through `reset()`, and only once the cause is gone | — | reset refused | `saf_req_011_latch_clears_only_by_reset_with_cause_gone`, property `saf_req_011_latched_fault_stays_latched` |
 //! | SAF-REQ-012 | the robot refuses a command or the link fails while sending | any send error | halt and latch | `saf_req_012_send_failure_latches` |
 //!
@@ -85,12 +90,18 @@
 //! ```
 //!
 //! # Limitations
-//! - The watched points are DH points (TCP flange, wrist 1, elbow axis); link radius and
-//!   tool are covered by Z_r and the box, not by capsules.
-//! - v_r is the full TCP speed, not its component towards each human point, and the wrist and
-//!   elbow speeds are bounded only through the joint limits.
-//! - A human not tracked (`None`) is not protected by SAF-REQ-007; perception staleness
-//!   (SAF-REQ-008) bounds how long tracking may lag.
+//! - SAF-REQ-007's geometry is a model: the capsules cover MuJoCo Menagerie's UR5e collision
+//!   geometry with ≥ 14 mm to spare (`robot-io/tests/geometry.rs`), but not the fixed base or
+//!   the joint-1 column below the shoulder axis; the gripper and part sizes are configured,
+//!   not measured, and the part capsule is always there, carried or not.
+//! - The hands are points: the fingers beyond the hand keypoint are the intrusion distance C.
+//!   Body parts that are not tracked (`None`), other persons and anything the camera does not
+//!   see are not protected by SAF-REQ-007; perception staleness (SAF-REQ-008) bounds how long
+//!   tracking may lag.
+//! - v_r is the flange's speed (the larger of commanded and measured), not its component
+//!   towards each part; a point of the gripper or part can move faster than the flange while
+//!   the wrist turns, and elbow and wrist speeds are bounded only through the joint limits.
+//! - The workspace box (SAF-REQ-006) still checks the three DH points, not the capsules.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::indexing_slicing))]
 
 mod config;
@@ -105,6 +116,6 @@ pub use config::{
     StalenessLimits, SupervisorConfig, WorkspaceBox,
 };
 pub use error::{Result, SafetyError};
-pub use separation::HumanPoint;
+pub use robot_io::geometry::{ArmLink, ArmModel, BodyModel, BodyPart, HumanBody, Torso};
 pub use supervisor::{SafeCommand, Supervisor, WorldView};
 pub use verdict::{Counters, MalformedInput, Requirement, Verdict, Violation};

@@ -1,12 +1,13 @@
-//! The points on the arm the supervisor watches: the TCP, the wrist and the elbow, from UR5e
-//! forward kinematics.
+//! The points on the arm the workspace box (SAF-REQ-006) and the TCP speed (SAF-REQ-005)
+//! use: the TCP, the wrist and the elbow, from UR5e forward kinematics. Separation
+//! (SAF-REQ-007) uses the capsules of `robot_io::geometry` instead.
 //!
 //! Frame naming follows `robot_io`'s kinematics: frame `i` is the frame after joint `i` of
 //! UR's standard DH chain. The **elbow** is the origin of frame 2 (on the elbow axis, far end
 //! of the upper arm), the **wrist** the origin of frame 3 (wrist 1, far end of the forearm),
 //! and the **TCP** the flange, frame 6 (no tool offset, as RTDE's `actual_TCP_pose` with no
 //! TCP configured). The points lie on the DH lines; link radius and tool size are covered by
-//! the separation's Z_r term and the workspace box's margins.
+//! the workspace box's margins.
 //!
 //! Forward kinematics is `robot_io::kinematics` (UR's published UR5e DH parameters), the
 //! same model `SimRobot` and `adapt` use.

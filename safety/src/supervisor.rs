@@ -1,12 +1,13 @@
 //! [`Supervisor`]: owns the robot, judges every command, and is the only path to
 //! `Robot::send`.
 
+use robot_io::geometry::{ARM_CAPSULES, BodyPart, Capsule, HumanBody, closest_approaches};
 use robot_io::{JointCommand, Joints, Robot, RobotState, safety_mode, safety_status_bits};
 
 use crate::config::SupervisorConfig;
 use crate::error::{Result, SafetyError};
 use crate::points::{arm_points, distance};
-use crate::separation::{HumanPoint, RobotMotion, protective_distance_m};
+use crate::separation::{RobotMotion, protective_distance_m};
 use crate::verdict::{Counters, MalformedInput, Requirement, Verdict, Violation};
 
 /// servoj lookahead range UR's controller accepts [s].
@@ -24,10 +25,11 @@ const RECHECK_TOLERANCE: f64 = 1e-9;
 pub struct WorldView {
     /// Time of this cycle on the trial's clock [s] (logged; the checks use ages, not times).
     pub now_s: f64,
-    /// Head, left hand, right hand (see [`HumanPoint::ALL`]) in the robot base frame [m];
-    /// `None` when not tracked.
-    pub human_points: [Option<[f64; 3]>; 3],
-    /// Age of the perception frame the human points come from [s].
+    /// The operator's tracked body (head, hands, torso) in the robot base frame [m]; a part
+    /// that is `None` is not tracked (and not protected by SAF-REQ-007). A non-finite point
+    /// or torso normal is malformed input (SAF-REQ-001).
+    pub human: HumanBody,
+    /// Age of the perception frame the body comes from [s].
     pub perception_age_s: f64,
     /// Whether a collaboration period C(t) is active (the task phase is Approach, Present or
     /// Release).
@@ -39,7 +41,7 @@ impl WorldView {
     pub fn clear(now_s: f64) -> Self {
         Self {
             now_s,
-            human_points: [None; 3],
+            human: HumanBody::NONE,
             perception_age_s: 0.0,
             collaborating: false,
         }
@@ -49,11 +51,7 @@ impl WorldView {
         self.now_s.is_finite()
             && self.perception_age_s.is_finite()
             && self.perception_age_s >= 0.0
-            && self
-                .human_points
-                .iter()
-                .flatten()
-                .all(|p| p.iter().all(|x| x.is_finite()))
+            && self.human.is_finite()
     }
 }
 
@@ -629,8 +627,12 @@ impl<R: Robot> Supervisor<R> {
         Ok(())
     }
 
-    /// Every tracked human point must be at least S_p from every watched point, now and at
-    /// the stopping configuration. v_r is the larger of the commanded and measured TCP speed.
+    /// SAF-REQ-007: every tracked body part's surface must be at least S_p from the surface
+    /// of every arm capsule (links, gripper, carried part), at the measured joints now and at
+    /// the stopping configuration. v_r is the larger of the commanded and measured TCP speed,
+    /// T_s the longer of the stops from the commanded and the measured joint speeds, v_h per
+    /// body part (walking for the head and torso, arm reach for the hands). The violation
+    /// names the part and the nearest link. Allocates nothing.
     fn check_separation(
         &self,
         q_stop: &Joints,
@@ -638,6 +640,9 @@ impl<R: Robot> Supervisor<R> {
         motion: &Motion,
         world: &WorldView,
     ) -> std::result::Result<(), Violation> {
+        if world.human == HumanBody::NONE {
+            return Ok(());
+        }
         let dt = self.config.cycle.seconds();
         let [tx, ty, tz, ..] = self.state.actual_tcp_speed;
         let measured = (tx * tx + ty * ty + tz * tz).sqrt();
@@ -649,22 +654,26 @@ impl<R: Robot> Supervisor<R> {
             speed_m_s: commanded.max(measured),
             stopping_time_s: t_stop,
         };
-        let now_points = arm_points(&self.state.actual_q).as_array();
-        let stop_points = arm_points(q_stop).as_array();
-        for (human, position) in HumanPoint::ALL.iter().zip(&world.human_points) {
-            let Some(h) = position else { continue };
+        let mut now = [Capsule::point([0.0; 3], 0.0); ARM_CAPSULES];
+        let mut stop = now;
+        self.config.arm.capsules(&self.state.actual_q, &mut now);
+        self.config.arm.capsules(q_stop, &mut stop);
+        let body = &self.config.body;
+        let now = closest_approaches(&now, &world.human, body);
+        let stop = closest_approaches(&stop, &world.human, body);
+        for ((part, at_now), at_stop) in BodyPart::ALL.iter().zip(&now).zip(&stop) {
             let required_m = protective_distance_m(
                 &self.config.separation,
-                *human,
+                *part,
                 robot,
                 world.perception_age_s,
             );
-            for (point, p) in now_points.iter().chain(&stop_points) {
-                let distance_m = distance(h, p);
+            for approach in [at_now, at_stop].into_iter().flatten() {
+                let distance_m = approach.distance_m;
                 if distance_m.is_nan() || required_m.is_nan() || distance_m < required_m {
                     return Err(Violation::Separation {
-                        human: *human,
-                        point: *point,
+                        part: *part,
+                        link: approach.link,
                         distance_m,
                         required_m,
                     });

@@ -2,8 +2,9 @@
 
 use std::fmt;
 
+use robot_io::geometry::{ArmLink, BodyPart};
+
 use crate::points::ArmPoint;
-use crate::separation::HumanPoint;
 
 /// A safety requirement (see the table in the crate docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -106,7 +107,7 @@ pub enum MalformedInput {
     ServoParameter,
     /// The robot state (positions, velocities, timestamp).
     RobotState,
-    /// The world view (time, perception age, human points).
+    /// The world view (time, perception age, a body point or torso normal).
     WorldView,
 }
 
@@ -159,13 +160,14 @@ pub enum Violation {
         /// Its position [m].
         position_m: [f64; 3],
     },
-    /// SAF-REQ-007: a human point closer than the protective separation distance.
+    /// SAF-REQ-007: a tracked body part closer to the arm than the protective separation
+    /// distance (surface to surface).
     Separation {
-        /// Which human point.
-        human: HumanPoint,
-        /// Which arm point is closest.
-        point: ArmPoint,
-        /// Distance [m].
+        /// Which body part.
+        part: BodyPart,
+        /// The arm link (capsule) nearest to it.
+        link: ArmLink,
+        /// Surface-to-surface distance [m] (NaN if an input was not finite).
         distance_m: f64,
         /// Required S_p [m].
         required_m: f64,
@@ -257,13 +259,13 @@ impl fmt::Display for Violation {
                 )
             }
             Violation::Separation {
-                human,
-                point,
+                part,
+                link,
                 distance_m,
                 required_m,
             } => write!(
                 f,
-                "{id}: {human:?} {distance_m:.3} m from {point:?}, needs {required_m:.3} m"
+                "{id}: {part} {distance_m:.3} m from the {link}, needs {required_m:.3} m"
             ),
             Violation::PerceptionStale { age_s, limit_s } => {
                 write!(f, "{id}: perception {age_s:.3} s old, limit {limit_s:.3} s")

@@ -45,7 +45,11 @@ fn step_allocates_nothing() {
                 }
                 2500..2600 => servo(nan),
                 2600..2700 => {
-                    world.human_points = [None, Some([hand[0], hand[1], hand[2]]), None];
+                    world.human.left_hand_m = Some([hand[0], hand[1], hand[2]]);
+                    world.human.torso = Some(safety::Torso {
+                        shoulder_mid_m: [hand[0], hand[1], hand[2] + 0.5],
+                        normal: [1.0, 0.0, 0.0],
+                    });
                     plan.next()
                 }
                 2700..2800 => {

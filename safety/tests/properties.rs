@@ -10,10 +10,11 @@ use std::f64::consts::PI;
 
 use common::{DT, MockRobot, Q_WORK, tcp_speed};
 use proptest::prelude::*;
+use robot_io::geometry::closest_approaches;
 use robot_io::{JointCommand, Joints, RobotState, safety_mode};
-use safety::points::{arm_points, distance};
+use safety::points::arm_points;
 use safety::separation::{RobotMotion, protective_distance_m};
-use safety::{HumanPoint, Supervisor, SupervisorConfig, Verdict, WorldView};
+use safety::{BodyPart, HumanBody, Supervisor, SupervisorConfig, Torso, Verdict, WorldView};
 
 #[derive(Debug, Clone)]
 struct Step {
@@ -65,10 +66,24 @@ fn human() -> impl Strategy<Value = Option<[f64; 3]>> {
     ]
 }
 
+fn torso() -> impl Strategy<Value = Option<Torso>> {
+    prop_oneof![
+        Just(None),
+        (
+            prop::array::uniform3(-1.5..1.5f64),
+            prop::array::uniform3(-1.0..1.0f64)
+        )
+            .prop_map(|(shoulder_mid_m, normal)| Some(Torso {
+                shoulder_mid_m,
+                normal
+            })),
+    ]
+}
+
 fn step() -> impl Strategy<Value = Step> {
     (
         command(),
-        (human(), human(), human()),
+        (human(), human(), human(), torso()),
         prop_oneof![3 => 0.0..0.2f64, 1 => 0.0..1.5f64],
         any::<bool>(),
         prop_oneof![10 => Just(safety_mode::NORMAL), 1 => Just(safety_mode::PROTECTIVE_STOP)],
@@ -76,11 +91,16 @@ fn step() -> impl Strategy<Value = Step> {
         prop_oneof![5 => Just(false), 1 => Just(true)],
     )
         .prop_map(
-            |(cmd, (h, l, r), age, collaborating, mode, freeze, reset)| Step {
+            |(cmd, (h, l, r, t), age, collaborating, mode, freeze, reset)| Step {
                 cmd,
                 world: WorldView {
                     now_s: 0.0,
-                    human_points: [h, l, r],
+                    human: HumanBody {
+                        head_m: h,
+                        left_hand_m: l,
+                        right_hand_m: r,
+                        torso: t,
+                    },
                     perception_age_s: age,
                     collaborating,
                 },
@@ -162,17 +182,25 @@ fn check_motion(
     for (point, p) in arm_points(&q_next).as_array() {
         prop_assert!(cfg.workspace.contains(&p), "{point:?} at {p:?}");
     }
-    // Separation: no human point within the smallest S_p (robot at rest) of the arm now.
-    let rest = RobotMotion {
-        speed_m_s: 0.0,
-        stopping_time_s: 0.0,
-    };
-    for (human, h) in HumanPoint::ALL.iter().zip(&world.human_points) {
-        let Some(h) = h else { continue };
-        let s_min = protective_distance_m(&cfg.separation, *human, rest, world.perception_age_s);
-        for (_, p) in arm_points(&state.actual_q).as_array() {
-            prop_assert!(distance(h, &p) >= s_min, "{human:?} too close");
-        }
+    // Separation: no tracked body part within the smallest S_p (robot at rest) of any arm
+    // capsule now (surface to surface).
+    let arm = common::capsules(&cfg.arm, &state.actual_q);
+    let near = closest_approaches(&arm, &world.human, &cfg.body);
+    for (part, approach) in BodyPart::ALL.iter().zip(near) {
+        let Some(a) = approach else { continue };
+        let s_min = protective_distance_m(
+            &cfg.separation,
+            *part,
+            RobotMotion::REST,
+            world.perception_age_s,
+        );
+        prop_assert!(
+            a.distance_m >= s_min,
+            "{} too close to the {}: {:?}",
+            part,
+            a.link,
+            a
+        );
     }
     Ok(next)
 }

@@ -4,13 +4,13 @@ mod common;
 
 use std::f64::consts::PI;
 
-use common::{DT, MockRobot, Q_WORK, servo, tcp_speed};
+use common::{DT, MockRobot, Q_WORK, beyond_part, servo, tcp_speed};
 use robot_io::{JointCommand, RobotState, safety_mode, safety_status_bits};
 use safety::points::{ArmPoint, arm_points};
 use safety::separation::{RobotMotion, protective_distance_m};
 use safety::{
-    HumanPoint, MalformedInput, Requirement, SafetyError, Supervisor, SupervisorConfig, Verdict,
-    Violation, WorkspaceBox, WorldView,
+    ArmLink, BodyPart, HumanBody, MalformedInput, Requirement, SafetyError, Supervisor,
+    SupervisorConfig, Torso, Verdict, Violation, WorkspaceBox, WorldView,
 };
 
 type Sup = Supervisor<MockRobot>;
@@ -100,7 +100,24 @@ fn saf_req_001_non_finite_values_are_rejected() {
         (
             servo(Q_WORK),
             WorldView {
-                human_points: [None, Some([f64::NAN, 0.0, 0.0]), None],
+                human: HumanBody {
+                    left_hand_m: Some([f64::NAN, 0.0, 0.0]),
+                    ..HumanBody::NONE
+                },
+                ..clear()
+            },
+            MalformedInput::WorldView,
+        ),
+        (
+            servo(Q_WORK),
+            WorldView {
+                human: HumanBody {
+                    torso: Some(Torso {
+                        shoulder_mid_m: [-1.0, 0.0, 0.5],
+                        normal: [f64::INFINITY, 0.0, 0.0],
+                    }),
+                    ..HumanBody::NONE
+                },
                 ..clear()
             },
             MalformedInput::WorldView,
@@ -287,20 +304,24 @@ fn saf_req_006_workspace_box() {
 
 #[test]
 fn saf_req_007_protective_separation() {
-    let p = arm_points(&Q_WORK);
-    let at = |d: f64| Some([p.tcp[0] - d, p.tcp[1], p.tcp[2]]);
-    let params = SupervisorConfig::ur5e().separation;
-    let rest = RobotMotion {
-        speed_m_s: 0.0,
-        stopping_time_s: 0.0,
+    let config = SupervisorConfig::ur5e();
+    let params = config.separation;
+    // A hand on the tool axis `d` beyond the carried part's surface: its nearest link is the
+    // part, `d` away (surface to surface).
+    let at = |d: f64| Some(beyond_part(&config.arm, &Q_WORK, d));
+    let hand = |d: f64| HumanBody {
+        left_hand_m: at(d),
+        ..HumanBody::NONE
     };
-    let s_rest = protective_distance_m(&params, HumanPoint::LeftHand, rest, 0.0);
-    assert!((s_rest - 0.41).abs() < 1e-12);
+    // By hand: at rest with fresh perception S_p = v_h·T_r + C + Z_d + Z_r
+    // = 2.0·0.1 + 0.1 + 0.05 + 0.02 = 0.37 m for a hand.
+    let s_rest = protective_distance_m(&params, BodyPart::LeftHand, RobotMotion::REST, 0.0);
+    assert!((s_rest - 0.37).abs() < 1e-12);
 
-    // A hand 0.3 m from the TCP: stop, even at rest.
+    // A hand 0.3 m from the part: stop, even at rest, naming the hand and the part.
     let (mut s, _) = rig(Q_WORK);
     let world = WorldView {
-        human_points: [None, at(0.3), None],
+        human: hand(0.3),
         ..clear()
     };
     let v = cycle(&mut s, &servo(Q_WORK), &world);
@@ -308,23 +329,30 @@ fn saf_req_007_protective_separation() {
         Verdict::Stopped {
             violation:
                 Violation::Separation {
-                    human,
-                    point,
+                    part,
+                    link,
                     distance_m,
                     required_m,
                 },
         } => {
-            assert_eq!(human, HumanPoint::LeftHand);
-            assert_eq!(point, ArmPoint::Tcp);
-            assert!((distance_m - 0.3).abs() < 1e-9);
+            assert_eq!(part, BodyPart::LeftHand);
+            assert_eq!(link, ArmLink::Part);
+            assert!((distance_m - 0.3).abs() < 1e-9, "{distance_m}");
             assert!((required_m - s_rest).abs() < 1e-9);
         }
         other => panic!("{other:?}"),
     }
-    // 0.5 m: fine at rest, not at 1 m/s (S_p grows with v_r and T_s).
+    assert_eq!(
+        v.violation().unwrap().to_string(),
+        "SAF-REQ-007: left_hand 0.300 m from the part, needs 0.370 m"
+    );
+    // 0.45 m: fine at rest, not at speed (S_p grows with v_r and T_s).
     let (mut s, _) = rig(Q_WORK);
     let world = WorldView {
-        human_points: [None, None, at(0.5)],
+        human: HumanBody {
+            right_hand_m: at(0.45),
+            ..HumanBody::NONE
+        },
         ..clear()
     };
     assert_eq!(cycle(&mut s, &servo(Q_WORK), &world), Verdict::Passed);
@@ -334,17 +362,20 @@ fn saf_req_007_protective_separation() {
         Some(Requirement::Saf007Separation),
         "{v:?}"
     );
-    // The head 1.5 m away does not stop a 1 m/s motion.
+    // The head 1.5 m beyond the part does not stop a 1 rad/s base motion.
     let (mut s, _) = rig(Q_WORK);
     let world = WorldView {
-        human_points: [at(1.5), None, None],
+        human: HumanBody {
+            head_m: at(1.5),
+            ..HumanBody::NONE
+        },
         ..clear()
     };
     let v = cycle(&mut s, &speed(base_speed(1.0), PI), &world);
     assert!(!v.is_stop(), "{v:?}");
-    // Old perception widens S_p by v_h·age.
+    // Old perception widens S_p by v_h·age: 0.37 + 2.0·0.15 = 0.67 > 0.45.
     let world = WorldView {
-        human_points: [None, at(0.5), None],
+        human: hand(0.45),
         perception_age_s: 0.15,
         ..clear()
     };

@@ -654,7 +654,12 @@ fn drive<R: Robot>(
             }
         }
         world.now_s = t;
-        world.human_points = [humans.head_m, humans.left_hand_m, humans.right_hand_m];
+        world.human = robot_io::geometry::HumanBody {
+            head_m: humans.head_m,
+            left_hand_m: humans.left_hand_m,
+            right_hand_m: humans.right_hand_m,
+            torso: None,
+        };
         world.perception_age_s = (t - last_cue_t).max(0.0);
         world.collaborating = controller.collaborating();
         let verdict = supervisor.step(&cmd, &world);

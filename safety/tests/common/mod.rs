@@ -5,6 +5,7 @@ use std::cell::RefCell;
 use std::f64::consts::FRAC_PI_2;
 use std::rc::Rc;
 
+use robot_io::geometry::{ARM_CAPSULES, ArmModel, Capsule};
 use robot_io::sim::SimRobot;
 use robot_io::{JointCommand, Joints, Robot, RobotIoError, RobotState};
 use safety::points::arm_points;
@@ -126,6 +127,23 @@ pub fn servo(q: Joints) -> JointCommand {
         lookahead_s: 0.05,
         gain: 500.0,
     }
+}
+
+/// The arm's capsules at `q` [rad] (base frame [m]).
+pub fn capsules(arm: &ArmModel, q: &Joints) -> [Capsule; ARM_CAPSULES] {
+    let mut out = [Capsule::point([0.0; 3], 0.0); ARM_CAPSULES];
+    arm.capsules(q, &mut out);
+    out
+}
+
+/// The point on the tool axis `clearance_m` [m] beyond the surface of the carried part's
+/// capsule (past its far end), at joints `q` [rad].
+pub fn beyond_part(arm: &ArmModel, q: &Joints, clearance_m: f64) -> [f64; 3] {
+    let part = capsules(arm, q)[robot_io::geometry::ArmLink::Part.index()];
+    let axis: Vec<f64> = (0..3).map(|k| part.b_m[k] - part.a_m[k]).collect();
+    let len = norm3(&axis);
+    let out = part.radius_m + clearance_m;
+    std::array::from_fn(|k| part.b_m[k] + axis[k] / len * out)
 }
 
 pub fn norm3(v: &[f64]) -> f64 {
