@@ -3,7 +3,7 @@
 //! 1. Reads the experiment TOML ([`ExperimentConfig`], `config/experiment-ab.toml`).
 //! 2. Draws the counterbalanced schedule with [`policies::ExperimentDesign`] (a Williams design
 //!    over the condition × policy cells, from the seed) and writes it as `schedule.csv` into
-//!    `<out-root>/<timestamp>-experiment/`.
+//!    `<out-root>/<timestamp>-experiment/` (a new folder: `-2`, `-3`, … when that exists).
 //! 3. Runs every trial with the simulated operator ([`crate::trial::run_simulated`]), one trial
 //!    folder each under the experiment folder. A participant's session is one job: its trials
 //!    run in schedule order on one worker; `--jobs` workers take sessions from a shared queue.
@@ -309,11 +309,11 @@ pub(crate) fn run(args: ExperimentArgs) -> anyhow::Result<()> {
         std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
     });
     anyhow::ensure!(jobs >= 1, "--jobs must be at least 1");
-    let dir = args
+    let wanted = args
         .out_root
         .join(format!("{}-experiment", crate::trial::wall_stamp()));
     let show = std::io::stderr().is_terminal();
-    let out = run_experiment(&args.config, &dir, jobs, show)?;
+    let out = run_experiment(&args.config, &wanted, jobs, show)?;
     eprintln!(
         "[simulation] {} trials ({} failed) in {:.1} s wall time on {jobs} worker(s)",
         out.trials, out.failed, out.wall_s
@@ -361,12 +361,10 @@ fn run_real_session(args: &ExperimentArgs, participant: &str) -> anyhow::Result<
     );
     let live = matches!(cues, CueSource::Camera(_));
     let robot = crate::trial::robot_choice(&robot_name, args.speedup, live)?;
-    let dir = args.out_root.join(format!(
+    let dir = crate::trial::create_run_dir(&args.out_root.join(format!(
         "{}-session-{participant}",
         crate::trial::wall_stamp()
-    ));
-    anyhow::ensure!(!dir.exists(), "{} exists already", dir.display());
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    )))?;
     write_schedule(&dir.join("schedule.csv"), std::slice::from_ref(&trials))?;
     eprintln!(
         "session of {participant} on {robot_name}: {} trials, folder {}",
@@ -421,6 +419,8 @@ fn run_real_session(args: &ExperimentArgs, participant: &str) -> anyhow::Result<
 /// What [`run_experiment`] did.
 #[derive(Debug)]
 pub(crate) struct ExperimentOutcome {
+    /// The experiment folder.
+    pub(crate) dir: PathBuf,
     /// Trials run.
     pub(crate) trials: usize,
     /// Of which failed.
@@ -431,10 +431,11 @@ pub(crate) struct ExperimentOutcome {
     pub(crate) report: PathBuf,
 }
 
-/// The whole experiment into `dir` (created; must not exist yet).
+/// The whole experiment into a new folder: `wanted`, or `wanted-2`, … when that exists
+/// ([`crate::trial::create_run_dir`]), created once the configuration has loaded.
 pub(crate) fn run_experiment(
     config_path: &Path,
-    dir: &Path,
+    wanted: &Path,
     jobs: usize,
     show_progress: bool,
 ) -> anyhow::Result<ExperimentOutcome> {
@@ -446,12 +447,9 @@ pub(crate) fn run_experiment(
         .schedule()
         .with_context(|| format!("{}: invalid design", config_path.display()))?;
     let sessions = plan(&schedule, cfg.seed)?;
-    anyhow::ensure!(
-        !dir.exists(),
-        "{} exists already; refusing to mix experiments",
-        dir.display()
-    );
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    // Never an existing folder: experiments are not mixed.
+    let dir = crate::trial::create_run_dir(wanted)?;
+    let dir = dir.as_path();
     write_schedule(&dir.join("schedule.csv"), &sessions)?;
 
     let total = sessions.iter().map(Vec::len).sum::<usize>();
@@ -490,6 +488,7 @@ pub(crate) fn run_experiment(
         },
     )?;
     Ok(ExperimentOutcome {
+        dir: dir.to_path_buf(),
         trials: runs.len(),
         failed: runs.iter().filter(|r| r.error.is_some()).count(),
         wall_s: started.elapsed().as_secs_f64(),

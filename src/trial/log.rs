@@ -307,11 +307,20 @@ impl TrialLog {
         );
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the run folder {}", dir.display()))?;
+        // A run folder is never reused (issue 10): another trial's log in it is refused, and
+        // the files are created exclusively, so two trials cannot share one.
+        for name in [SUMMARY_FILE, super::report::HTML_FILE] {
+            anyhow::ensure!(
+                !dir.join(name).exists(),
+                "{} holds another trial's log ({name}); refusing to overwrite it",
+                dir.display()
+            );
+        }
         let open = |name: &str| {
             let p = dir.join(name);
-            File::create(&p)
-                .map(BufWriter::new)
-                .with_context(|| format!("cannot create {}", p.display()))
+            File::create_new(&p).map(BufWriter::new).with_context(|| {
+                format!("cannot create {} (another trial's log?)", p.display())
+            })
         };
         let write_options = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))

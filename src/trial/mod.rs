@@ -25,10 +25,11 @@ pub(crate) mod operator;
 mod report;
 pub(crate) mod runtime;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use anyhow::Context as _;
 use clap::Args;
 use policies::PolicyKind;
 
@@ -102,14 +103,9 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
     )?;
     let live = matches!(cues, cues::CueSource::Camera(_));
     let robot = robot_choice(&args.robot, args.speedup, live)?;
-    // The wall clock is used only for the folder name.
-    let stamp = wall_stamp();
-    let dir = args.out_root.join(format!(
-        "{stamp}-{}-{}-{}",
-        spec.participant,
-        spec.condition.as_str(),
-        spec.policy.as_str()
-    ));
+    // The wall clock is used only for the folder name; a folder of the same second gets a
+    // suffix (-2, -3, …).
+    let dir = create_run_dir(&run_folder(&args.out_root, &wall_stamp(), &spec))?;
     // The supervisor's per-cycle messages (about 900 warnings per L2 trial) would bury the
     // live display: the trial thread logs warnings of the trial itself and errors only, unless
     // RUST_LOG says otherwise. Every verdict is in trial.mcap (/robot/command), and the
@@ -264,6 +260,54 @@ pub(crate) fn install_ctrl_c(stop: Arc<AtomicBool>) {
     });
 }
 
+/// The run folder a trial wants under `out_root`: `<stamp>-<participant>-<condition>-<policy>`
+/// (`stamp` from [`wall_stamp`], injected for tests). [`create_run_dir`] makes it unique.
+pub(crate) fn run_folder(out_root: &Path, stamp: &str, spec: &TrialSpec) -> PathBuf {
+    out_root.join(format!(
+        "{stamp}-{}-{}-{}",
+        spec.participant,
+        spec.condition.as_str(),
+        spec.policy.as_str()
+    ))
+}
+
+/// Most suffixes [`create_run_dir`] tries (`-2` … `-999`) before it gives up.
+const MAX_RUN_DIR_SUFFIX: u32 = 999;
+
+/// Creates a new, empty run folder at `wanted`, or at `wanted-2`, `wanted-3`, … when that
+/// exists (two runs started in the same second), and returns it. The leaf is created
+/// exclusively (`create_dir`, not `create_dir_all`), so two processes never share a folder;
+/// the parents are created as needed. Used by `trial` and `experiment` (issue 10).
+pub(crate) fn create_run_dir(wanted: &Path) -> anyhow::Result<PathBuf> {
+    let (Some(parent), Some(name)) = (wanted.parent(), wanted.file_name()) else {
+        anyhow::bail!("{} cannot be a run folder", wanted.display());
+    };
+    if !parent.as_os_str().is_empty() {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("cannot create {}", parent.display()))?;
+    }
+    for n in 1..=MAX_RUN_DIR_SUFFIX {
+        let dir = if n == 1 {
+            wanted.to_path_buf()
+        } else {
+            let mut leaf = name.to_os_string();
+            leaf.push(format!("-{n}"));
+            parent.join(leaf)
+        };
+        match std::fs::create_dir(&dir) {
+            Ok(()) => return Ok(dir),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => {
+                return Err(e).with_context(|| format!("cannot create {}", dir.display()));
+            }
+        }
+    }
+    anyhow::bail!(
+        "{} and its suffixes -2 … -{MAX_RUN_DIR_SUFFIX} all exist",
+        wanted.display()
+    )
+}
+
 /// `YYYYmmdd-HHMMSS` (UTC) of the wall clock, for folder names only.
 pub(crate) fn wall_stamp() -> String {
     let (y, m, d, hh, mm, ss) = utc_now();
@@ -300,6 +344,54 @@ mod tests {
     use super::*;
     use crate::vision_cmd::CameraArgs;
     use std::path::Path;
+
+    #[test]
+    fn two_trials_started_in_the_same_second_get_different_run_folders() {
+        // Issue 10: both trials of one UTC second wrote into one folder. The stamp is
+        // injected, so "the same second" needs no sleep.
+        let tmp = tempfile::tempdir().unwrap();
+        let root = tmp.path().join("runs");
+        let spec = runtime::test_spec(operator::Level::L1, 1, 2.0);
+        let wanted = run_folder(&root, "20260101-120000", &spec);
+        assert_eq!(
+            wanted,
+            root.join("20260101-120000-P01-L1-adaptive"),
+            "the README's naming"
+        );
+        let first = create_run_dir(&wanted).unwrap();
+        let second = create_run_dir(&wanted).unwrap();
+        let third = create_run_dir(&wanted).unwrap();
+        assert_eq!(first, wanted);
+        assert_eq!(second, root.join("20260101-120000-P01-L1-adaptive-2"));
+        assert_eq!(third, root.join("20260101-120000-P01-L1-adaptive-3"));
+        // Both trials run, each into its own folder, and neither log is touched by the other.
+        let a = run_simulated(&spec, &first, false).unwrap();
+        let b = run_simulated(&spec, &second, false).unwrap();
+        assert_ne!(a, b);
+        for d in [&a, &b] {
+            assert!(d.join("summary.json").is_file() && d.join("trial.mcap").is_file());
+        }
+        // A file of that name is not a folder to write into: the next suffix is taken.
+        std::fs::write(root.join("blocked"), "").unwrap();
+        assert!(create_run_dir(&root.join("blocked")).is_ok_and(|d| d.ends_with("blocked-2")));
+    }
+
+    #[test]
+    fn a_trial_never_writes_into_a_folder_holding_another_trials_log() {
+        // At a077dd5 TrialLog::create reused the folder and overwrote the files in it.
+        let tmp = tempfile::tempdir().unwrap();
+        let spec = runtime::test_spec(operator::Level::L1, 1, 2.0);
+        let dir = tmp.path().join("run");
+        std::fs::create_dir(&dir).unwrap();
+        std::fs::write(dir.join("trial.mcap"), "another trial's log").unwrap();
+        let e = format!("{:#}", run_simulated(&spec, &dir, false).unwrap_err());
+        assert!(e.contains("trial.mcap") && e.contains("another trial"), "{e}");
+        assert_eq!(
+            std::fs::read_to_string(dir.join("trial.mcap")).unwrap(),
+            "another trial's log"
+        );
+        assert!(!dir.join("summary.json").exists());
+    }
 
     #[test]
     fn a_live_camera_needs_real_time() {
