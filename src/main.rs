@@ -47,7 +47,19 @@ struct ConfigArgs {
     print_default: bool,
 }
 
-fn main() -> anyhow::Result<()> {
+/// Runs the command; an error is printed as anyhow prints it, and the exit code says how a
+/// trial ended (README, "Exit codes"): 1 for other errors, 2 for usage errors (clap).
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("Error: {e:?}");
+            std::process::ExitCode::from(trial::exit_code(&e))
+        }
+    }
+}
+
+fn run() -> anyhow::Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),

@@ -1,26 +1,70 @@
 //! Robots reached over RTDE for a trial: the in-process controller **emulator** on loopback
 //! ports (`--robot emulator`) and a real UR5e (`--robot <ip>`).
 //!
-//! Both hand the runtime a [`PacedRtde`]: an [`RtdeRobot`] whose `read_state` blocks until a
-//! sample with a newer controller timestamp arrives, so the trial loop runs once per controller
+//! Both hand the runtime a [`PacedRtde`]: an [`RtdeRobot`] whose `read_state` waits for a
+//! sample with a newer controller timestamp, so the trial loop runs once per controller
 //! cycle on the **robot's clock** (the emulator's virtual clock, sped up by
 //! [`EmulatorConfig::speedup`]), not on the wall clock. When the loop falls behind, it takes
 //! the newest sample and skips the older ones (the runtime's time is the controller
 //! timestamp, so skipped cycles show as longer steps).
+//!
+//! # The wait, and link loss
+//! `read_state` never blocks longer than [`SAMPLE_WAIT`], two controller periods (4 ms of wall
+//! time). A controller sends a sample every period, so the wait normally ends within one.
+//! When none arrives in time, `read_state` returns the previous state again (same
+//! timestamp): the runtime counts a missed cycle and the supervisor's robot-state staleness
+//! check (SAF-REQ-009) stops the robot after 3 of them. While the client knows the link is
+//! down (reconnecting), `read_state` waits the same bounded time and then fails with
+//! `LinkDown`, and `send` fails too (the command is kept for the reconnection; the
+//! supervisor latches SAF-REQ-012 and stops).
+//!
+//! The [`RtdeRobot`]'s client reconnects by itself (the RTDE set-up again, then the last
+//! inputs). Whether the trial resumes is the runtime's decision (`[link]` in the trial
+//! config); when it does and the controller's register watchdog stopped our program
+//! meanwhile, the runtime asks for it again through [`TrialRobot::restart_program`], which
+//! re-sends it through a `ScriptSender` on the tokio runtime without blocking the loop.
 
 use std::io::BufRead as _;
-use std::time::Duration;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use robot_io::dashboard::DashboardClient;
 use robot_io::emulator::{Emulator, EmulatorConfig, SimBackend};
 use robot_io::rtde_robot::{RtdeRobot, RtdeRobotConfig};
-use robot_io::script::{RegisterMap, ScriptSender};
+use robot_io::script::RegisterMap;
 use robot_io::sim::{SimConfig, SimRobot};
-use robot_io::{JointCommand, Robot, RobotState, runtime_state};
+use robot_io::{JointCommand, Robot, RobotIoError, RobotState, runtime_state};
 
-/// How long `read_state` waits for a newer sample before it reports the link as down.
-const SAMPLE_TIMEOUT: Duration = Duration::from_secs(2);
+use super::runtime::TrialRobot;
+
+/// The longest `read_state` waits for a newer sample: two controller periods of wall time.
+pub(crate) const SAMPLE_WAIT: Duration = Duration::from_millis(4);
+
+/// How long set-up (connect, the program starting) waits for one sample.
+const SETUP_SAMPLE_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// Ports of a UR controller (or of `hrc-adapt emulate`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct UrPorts {
+    /// RTDE (30004).
+    pub(crate) rtde: u16,
+    /// Dashboard server (29999).
+    pub(crate) dashboard: u16,
+    /// Script port our control program is sent to (30002, the secondary interface).
+    pub(crate) script: u16,
+}
+
+impl Default for UrPorts {
+    fn default() -> Self {
+        Self {
+            rtde: robot_io::client::RTDE_PORT,
+            dashboard: robot_io::dashboard::DASHBOARD_PORT,
+            script: robot_io::script::SECONDARY_PORT,
+        }
+    }
+}
 
 /// An [`RtdeRobot`] paced on the controller timestamp (see the module docs).
 pub(crate) struct PacedRtde {
@@ -37,20 +81,54 @@ impl std::fmt::Debug for PacedRtde {
     }
 }
 
+impl PacedRtde {
+    fn new(robot: RtdeRobot, rt: &tokio::runtime::Runtime) -> Self {
+        Self {
+            robot,
+            rt: rt.handle().clone(),
+            last_ts: f64::NEG_INFINITY,
+        }
+    }
+}
+
 impl Robot for PacedRtde {
     /// The newest sample if its timestamp is newer than the last one returned; else waits for
-    /// the next one.
+    /// the next one, at most [`SAMPLE_WAIT`], and then returns the previous state again.
+    ///
+    /// # Implementation
+    /// Blocks at most [`SAMPLE_WAIT`] (4 ms), on success and on error: normally until the
+    /// next sample, within one controller period. While the link is down, errors with
+    /// `LinkDown` after the same wait (so a loop polling it runs at about the control rate).
     fn read_state(&mut self, out: &mut RobotState) -> robot_io::Result<()> {
-        if self.robot.read_state(out).is_ok() && out.timestamp_s > self.last_ts {
-            self.last_ts = out.timestamp_s;
-            return Ok(());
-        }
+        let deadline = Instant::now() + SAMPLE_WAIT;
         loop {
-            self.rt
-                .block_on(self.robot.wait_state(out, SAMPLE_TIMEOUT))?;
+            if let Err(e) = self.robot.read_state(out) {
+                std::thread::sleep(deadline.saturating_duration_since(Instant::now()));
+                return Err(e);
+            }
             if out.timestamp_s > self.last_ts {
                 self.last_ts = out.timestamp_s;
                 return Ok(());
+            }
+            // `out` holds the previous state; wait for the next sample.
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Ok(());
+            }
+            let mut next = *out;
+            match self.rt.block_on(self.robot.wait_state(&mut next, left)) {
+                Ok(()) if next.timestamp_s > self.last_ts => {
+                    self.last_ts = next.timestamp_s;
+                    *out = next;
+                    return Ok(());
+                }
+                Ok(()) => {}
+                // No sample in time: the previous state again.
+                Err(RobotIoError::Timeout { .. }) => return Ok(()),
+                Err(e) => {
+                    std::thread::sleep(deadline.saturating_duration_since(Instant::now()));
+                    return Err(e);
+                }
             }
         }
     }
@@ -60,10 +138,16 @@ impl Robot for PacedRtde {
     }
 }
 
+impl TrialRobot for PacedRtde {
+    fn restart_program(&self) -> bool {
+        self.robot.restart_program()
+    }
+}
+
 /// What keeps an RTDE robot's connection alive: the emulator (`None` for a real robot) and the
 /// tokio runtime its tasks and the client's run on.
 pub(crate) struct RtdeGuard {
-    emulator: Option<Emulator>,
+    emulator: Option<Arc<Emulator>>,
     rt: tokio::runtime::Runtime,
 }
 
@@ -76,9 +160,15 @@ impl std::fmt::Debug for RtdeGuard {
 }
 
 impl RtdeGuard {
+    /// The in-process emulator (tests freeze and kill it).
+    #[cfg(test)]
+    pub(crate) fn emulator(&self) -> Option<Arc<Emulator>> {
+        self.emulator.clone()
+    }
+
     /// Stops the emulator (if any) and the runtime.
     pub(crate) fn close(mut self) {
-        if let Some(mut e) = self.emulator.take() {
+        if let Some(e) = self.emulator.take() {
             e.shutdown();
         }
         self.rt.shutdown_timeout(Duration::from_millis(200));
@@ -94,7 +184,8 @@ fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
 }
 
 /// Connects an `RtdeRobot` at `host:port`, sends our control program to `script_port` and
-/// waits until it plays.
+/// waits until it plays. The robot keeps the script port, to restart the program after a
+/// link loss ([`TrialRobot::restart_program`]).
 async fn connect(
     host: &str,
     port: u16,
@@ -104,17 +195,20 @@ async fn connect(
     let mut rcfg = RtdeRobotConfig::new(host);
     rcfg.port = port;
     rcfg.registers = map;
+    // A host without real-time scheduling: silence shorter than this is no link loss for the
+    // client (the trial's own `[link] lost_after_s` and the supervisor act much sooner).
     rcfg.link_loss_min = Duration::from_secs(3);
+    rcfg.program_port = Some(script_port);
     let mut robot = RtdeRobot::connect(rcfg)
         .await
         .with_context(|| format!("cannot connect RTDE at {host}:{port}"))?;
-    ScriptSender::new(host, script_port)
-        .send_control_program(&map)
+    robot
+        .start_program()
         .await
         .context("cannot send the control program")?;
     let mut s = RobotState::default();
     for _ in 0..5000 {
-        robot.wait_state(&mut s, SAMPLE_TIMEOUT).await?;
+        robot.wait_state(&mut s, SETUP_SAMPLE_TIMEOUT).await?;
         if s.runtime_state == runtime_state::PLAYING {
             return Ok(robot);
         }
@@ -165,34 +259,59 @@ pub(crate) fn start_emulator(
         .await?;
         anyhow::Ok((emu, robot))
     })?;
-    let robot = PacedRtde {
-        robot,
-        rt: rt.handle().clone(),
-        last_ts: f64::NEG_INFINITY,
-    };
+    let robot = PacedRtde::new(robot, &rt);
     Ok((
         robot,
         RtdeGuard {
-            emulator: Some(emulator),
+            emulator: Some(Arc::new(emulator)),
             rt,
         },
     ))
 }
 
-/// A real UR5e at `host` (untested here: no robot available). Connects the dashboard, prints
-/// the robot mode, safety status and remote-control state, refuses unless the robot is in
-/// remote control with a normal safety status, asks for confirmation on stdin, then connects
-/// RTDE and starts our control program.
-pub(crate) fn connect_ur(host: &str) -> anyhow::Result<(PacedRtde, RtdeGuard)> {
+/// Reads one line from stdin, giving up when `stop` is set (Ctrl-C): `None` then. The line is
+/// read in a helper thread (a blocked read cannot be interrupted); after an interruption it
+/// stays blocked until stdin gives a line or closes, and that line is lost.
+fn read_line_or_stop(stop: &AtomicBool) -> anyhow::Result<Option<String>> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::Builder::new()
+        .name("confirmation".into())
+        .spawn(move || {
+            let mut line = String::new();
+            let r = std::io::stdin().lock().read_line(&mut line).map(|_| line);
+            let _ = tx.send(r);
+        })
+        .context("cannot start the stdin reader")?;
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return Ok(None);
+        }
+        match rx.recv_timeout(Duration::from_millis(50)) {
+            Ok(r) => return Ok(Some(r.context("reading the confirmation")?)),
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                anyhow::bail!("the stdin reader ended without a line")
+            }
+        }
+    }
+}
+
+/// A real UR5e at `host` (or `hrc-adapt emulate` there, on `ports`). Connects the
+/// dashboard, prints the robot mode, safety status and remote-control state, refuses unless
+/// the robot is in remote control with a normal safety status, asks for confirmation on
+/// stdin (Ctrl-C there ends as `interrupted`, nothing moved), then connects RTDE and starts
+/// our control program. Untested on a real robot (none available); tested against the
+/// emulator process.
+pub(crate) fn connect_ur(
+    host: &str,
+    ports: UrPorts,
+    stop: &AtomicBool,
+) -> anyhow::Result<(PacedRtde, RtdeGuard)> {
     let rt = runtime()?;
     rt.block_on(async {
-        let mut d = DashboardClient::connect(
-            host,
-            robot_io::dashboard::DASHBOARD_PORT,
-            Duration::from_secs(3),
-        )
-        .await
-        .with_context(|| format!("cannot connect the dashboard of {host}"))?;
+        let mut d = DashboardClient::connect(host, ports.dashboard, Duration::from_secs(3))
+            .await
+            .with_context(|| format!("cannot connect the dashboard of {host}"))?;
         let remote = d.is_in_remote_control().await?;
         let mode = d.robot_mode().await?;
         let safety = d.safety_status().await?;
@@ -210,19 +329,21 @@ pub(crate) fn connect_ur(host: &str) -> anyhow::Result<(PacedRtde, RtdeGuard)> {
     eprint!(
         "The robot will move. Keep the workspace clear except for the operator. Type `yes` to start: "
     );
-    let mut line = String::new();
-    std::io::stdin().lock().read_line(&mut line)?;
+    let Some(line) = read_line_or_stop(stop)? else {
+        eprintln!();
+        return Err(super::runtime::TrialEnded::before_start(
+            "interrupted",
+            anyhow::anyhow!("interrupted at the confirmation prompt; nothing moved"),
+        )
+        .into());
+    };
     anyhow::ensure!(line.trim() == "yes", "not confirmed; nothing moved");
     let robot = rt.block_on(connect(
         host,
-        robot_io::client::RTDE_PORT,
-        robot_io::script::SECONDARY_PORT,
+        ports.rtde,
+        ports.script,
         RegisterMap::default(),
     ))?;
-    let robot = PacedRtde {
-        robot,
-        rt: rt.handle().clone(),
-        last_ts: f64::NEG_INFINITY,
-    };
+    let robot = PacedRtde::new(robot, &rt);
     Ok((robot, RtdeGuard { emulator: None, rt }))
 }

@@ -38,7 +38,55 @@ pub(crate) struct TrialConfig {
     pub(crate) robot_full_rate: bool,
     /// Workspace → base transform.
     pub(crate) frame: FrameConfig,
+    /// What happens when the robot link is lost (`[link]`; defaults without the table).
+    #[serde(default)]
+    pub(crate) link: LinkConfig,
+    /// When a task counts as impossible (`[progress]`; defaults without the table).
+    #[serde(default)]
+    pub(crate) progress: ProgressConfig,
 }
+
+/// `[link]`: a lost robot link (RTDE robots only; see `runtime.rs`, "Link loss").
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub(crate) struct LinkConfig {
+    /// No new robot state for this long (wall time) is a link loss [s], in [0.01, 60]. The
+    /// supervisor has stopped the robot long before (SAF-REQ-009, after 3 missed cycles).
+    pub(crate) lost_after_s: f64,
+    /// Resume the trial once the link is back (else it ends as `link_lost`).
+    pub(crate) resume: bool,
+    /// With `resume`: end as `link_lost` if the link is not back this long after the loss
+    /// (wall time) [s], in (0, 3600].
+    pub(crate) resume_within_s: f64,
+}
+
+impl Default for LinkConfig {
+    fn default() -> Self {
+        Self {
+            lost_after_s: 0.5,
+            resume: false,
+            resume_within_s: 10.0,
+        }
+    }
+}
+
+/// `[progress]`: when a task counts as impossible.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub(crate) struct ProgressConfig {
+    /// A motion phase (fetch, approach, retreat) that gets no closer to its target for this
+    /// long (trial time) ends the trial as `task_impossible` [s], in [0.1, 3600].
+    pub(crate) stuck_after_s: f64,
+}
+
+impl Default for ProgressConfig {
+    fn default() -> Self {
+        Self {
+            stuck_after_s: 10.0,
+        }
+    }
+}
+
 
 /// The robot base pose in the workspace frame.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
@@ -107,6 +155,22 @@ impl TrialConfig {
             cfg.frame.robot_base_origin_m.iter().all(|v| v.is_finite())
                 && cfg.frame.robot_base_yaw_deg.is_finite(),
             "frame values must be finite"
+        );
+        let link = cfg.link;
+        anyhow::ensure!(
+            (0.01..=60.0).contains(&link.lost_after_s),
+            "link.lost_after_s must be in [0.01, 60] s, got {}",
+            link.lost_after_s
+        );
+        anyhow::ensure!(
+            link.resume_within_s > 0.0 && link.resume_within_s <= 3600.0,
+            "link.resume_within_s must be in (0, 3600] s, got {}",
+            link.resume_within_s
+        );
+        anyhow::ensure!(
+            (0.1..=3600.0).contains(&cfg.progress.stuck_after_s),
+            "progress.stuck_after_s must be in [0.1, 3600] s, got {}",
+            cfg.progress.stuck_after_s
         );
         Ok(cfg)
     }

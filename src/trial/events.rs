@@ -29,6 +29,9 @@ pub(crate) enum TrialEvent {
         /// The requirement that fired, e.g. "SAF-REQ-007".
         requirement: &'static str,
     },
+    /// The robot link was lost (`up: false`: no robot state for `[link] lost_after_s`; the
+    /// trial pauses) or is back and the trial resumes (`up: true`).
+    Link { up: bool },
     /// The trial ended (all handovers done, stopped by the user, or a fault).
     Finished { reason: &'static str },
 }

@@ -106,11 +106,9 @@ impl LiveCues {
             std::thread::Builder::new()
                 .name("perception".into())
                 .spawn(move || {
-                    let result = perceive(&spec, &landmarks, &shared, &described_tx);
-                    let mut slot = shared.slot.lock().unwrap_or_else(|e| e.into_inner());
-                    slot.done = true;
-                    shared.changed.notify_all();
-                    result
+                    guarded(&shared, || {
+                        perceive(&spec, &landmarks, &shared, &described_tx)
+                    })
                 })
                 .context("cannot start the perception thread")?
         };
@@ -212,6 +210,26 @@ impl Drop for LiveCues {
     }
 }
 
+/// Runs the perception thread's `body`: a panic in it becomes an error, and the slot is
+/// marked done whatever happens, so the trial loop sees the cues end (`cues_ended`) and the
+/// runtime's exit path stops the robot and finishes the logs (as `error`, with this error from
+/// [`LiveCues::finish`]) instead of holding the last frame until the supervisor's perception
+/// staleness stop.
+fn guarded(shared: &Shared, body: impl FnOnce() -> anyhow::Result<()>) -> anyhow::Result<()> {
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(body)).unwrap_or_else(|p| {
+        let msg = p
+            .downcast_ref::<&str>()
+            .copied()
+            .or_else(|| p.downcast_ref::<String>().map(String::as_str))
+            .unwrap_or("(no message)");
+        Err(anyhow::anyhow!("the perception thread panicked: {msg}"))
+    });
+    let mut slot = shared.slot.lock().unwrap_or_else(|e| e.into_inner());
+    slot.done = true;
+    shared.changed.notify_all();
+    result
+}
+
 /// The perception thread: opens the source and the models, then frame → landmarks → cues
 /// into the slot until the source ends or `stop`.
 fn perceive(
@@ -280,6 +298,28 @@ mod tests {
     use std::sync::atomic::AtomicBool;
 
     use super::*;
+
+    /// A panic in the perception thread (a non-real-time thread) is an error, not an abort,
+    /// and the slot is marked done so that the trial loop sees the cues end.
+    #[test]
+    fn a_panic_in_the_perception_thread_is_an_error_and_ends_the_cues() {
+        let shared = Arc::new(Shared::default());
+        let thread = {
+            let shared = shared.clone();
+            std::thread::spawn(move || guarded(&shared, || panic!("model file truncated")))
+        };
+        let result = thread.join().expect("the thread itself does not panic");
+        let e = format!("{:#}", result.unwrap_err());
+        assert!(e.contains("panicked: model file truncated"), "{e}");
+        assert!(
+            shared.slot.lock().unwrap().done,
+            "the loop would wait forever"
+        );
+        // And a normal end marks it done too.
+        let ok = Shared::default();
+        guarded(&ok, || Ok(())).unwrap();
+        assert!(ok.slot.lock().unwrap().done);
+    }
     use crate::trial::cues::CueSource;
     use crate::trial::operator::Level;
     use crate::trial::runtime::{RobotChoice, TrialSpec, run_trial_with_cues};
@@ -321,7 +361,7 @@ mod tests {
         let stop = AtomicBool::new(false);
         let e = run_trial_with_cues(
             &spec(5.0),
-            &RobotChoice::Ur("192.0.2.1".into()),
+            &RobotChoice::ur("192.0.2.1"),
             &camera(images, None),
             &dir.path().join("run"),
             &stop,

@@ -304,6 +304,8 @@ pub(crate) fn event_name(e: &TrialEvent) -> &'static str {
         TrialEvent::Hesitation { .. } => "hesitation",
         TrialEvent::AdaptationChanged { .. } => "adaptation_changed",
         TrialEvent::Safety { .. } => "safety",
+        TrialEvent::Link { up: false } => "link_lost",
+        TrialEvent::Link { up: true } => "link_restored",
         TrialEvent::Finished { .. } => "finished",
     }
 }
@@ -338,7 +340,7 @@ pub(crate) fn event_json(out: &mut Vec<u8>, t_s: f64, e: &TrialEvent) -> usize {
         TrialEvent::Hesitation { active: a } => active = Some(a),
         TrialEvent::AdaptationChanged { indicator: i } => indicator = Some(i),
         TrialEvent::Finished { reason: r } => reason = Some(r),
-        TrialEvent::Safety { .. } => {}
+        TrialEvent::Safety { .. } | TrialEvent::Link { .. } => {}
     }
     for (k, v) in [
         ("phase", phase),

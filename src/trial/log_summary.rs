@@ -324,7 +324,7 @@ pub(crate) fn compute(
                 *safety.by_reaction.entry(reaction.into()).or_default() += 1;
                 *safety.by_requirement.entry(requirement.into()).or_default() += 1;
             }
-            TrialEvent::Finished { .. } => {}
+            TrialEvent::Finished { .. } | TrialEvent::Link { .. } => {}
         }
     }
     // Close what is still open at the end.

@@ -81,6 +81,17 @@ pub(crate) struct TrialArgs {
     /// Folder under which the run folder is created.
     #[arg(long, default_value = "runs")]
     out_root: PathBuf,
+    /// With `--robot <address>`: the controller's RTDE port (default 30004; e.g. the
+    /// `--rtde-port` of `hrc-adapt emulate`).
+    #[arg(long)]
+    rtde_port: Option<u16>,
+    /// With `--robot <address>`: its dashboard port (default 29999).
+    #[arg(long)]
+    dashboard_port: Option<u16>,
+    /// With `--robot <address>`: the script port our control program is sent to (default
+    /// 30002, the secondary interface).
+    #[arg(long)]
+    script_port: Option<u16>,
 }
 
 /// Runs `hrc-adapt trial`.
@@ -102,7 +113,22 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
         args.store_video.as_deref(),
     )?;
     let live = matches!(cues, cues::CueSource::Camera(_));
-    let robot = robot_choice(&args.robot, args.speedup, live)?;
+    let mut robot = robot_choice(&args.robot, args.speedup, live)?;
+    let given = [args.rtde_port, args.dashboard_port, args.script_port];
+    match &mut robot {
+        runtime::RobotChoice::Ur { ports, .. } => {
+            let d = backend::UrPorts::default();
+            *ports = backend::UrPorts {
+                rtde: args.rtde_port.unwrap_or(d.rtde),
+                dashboard: args.dashboard_port.unwrap_or(d.dashboard),
+                script: args.script_port.unwrap_or(d.script),
+            };
+        }
+        _ => anyhow::ensure!(
+            given.iter().all(Option::is_none),
+            "--rtde-port, --dashboard-port and --script-port need --robot <address>"
+        ),
+    }
     // The wall clock is used only for the folder name; a folder of the same second gets a
     // suffix (-2, -3, …).
     let dir = create_run_dir(&run_folder(&args.out_root, &wall_stamp(), &spec))?;
@@ -117,11 +143,24 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
     let out = runtime::run_trial_with_cues(&spec, &robot, &cues, &dir, &stop, &mut |l| {
         runtime::update_bar(&bar, l)
-    })?;
+    });
     bar.finish_and_clear();
     if stop.load(Ordering::Relaxed) {
         eprintln!("interrupted: robot stopped, logs closed");
     }
+    // Every ending that opened the logs names the run folder (on stdout, as a success does).
+    let out = match out {
+        Ok(out) => out,
+        Err(e) => {
+            if let Some(dir) = e
+                .downcast_ref::<runtime::TrialEnded>()
+                .and_then(|t| t.dir.as_ref())
+            {
+                println!("{}", dir.display());
+            }
+            return Err(e);
+        }
+    };
     match (&args.cues, live) {
         (None, _) => eprintln!(
             "[simulation] trial on {} finished in {:.1} s wall time",
@@ -171,7 +210,10 @@ pub(crate) fn robot_choice(
             };
             runtime::RobotChoice::Emulator { speedup }
         }
-        host => runtime::RobotChoice::Ur(host.to_owned()),
+        host => runtime::RobotChoice::Ur {
+            host: host.to_owned(),
+            ports: backend::UrPorts::default(),
+        },
     })
 }
 
@@ -226,6 +268,13 @@ pub(crate) fn cue_source(
         store_video: store_video.map(std::path::Path::to_path_buf),
         require_depth: false,
     }))
+}
+
+/// The process exit code for an error of `hrc-adapt trial` or `experiment`: the trial's
+/// ([`runtime::exit_code`], README "Exit codes") when a trial ended abnormally, else 1.
+pub(crate) fn exit_code(e: &anyhow::Error) -> u8 {
+    e.downcast_ref::<runtime::TrialEnded>()
+        .map_or(1, runtime::TrialEnded::exit_code)
 }
 
 /// The log filter while a trial runs, unless `RUST_LOG` says otherwise: errors, and the
@@ -417,7 +466,7 @@ mod tests {
         assert!(e.contains("mock clock"), "{e}");
         assert!(matches!(
             robot_choice("192.168.1.10", None, true).unwrap(),
-            runtime::RobotChoice::Ur(h) if h == "192.168.1.10"
+            runtime::RobotChoice::Ur { host, ports } if host == "192.168.1.10" && ports == backend::UrPorts::default()
         ));
     }
 

@@ -10,7 +10,7 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use adapt::controller::{
     Controller, ControllerConfig, HumanPoints, MotionAdaptation, RawHandoverFile, SmoothnessScale,
@@ -22,8 +22,9 @@ use assess::{AreaRole, AssessConfig, Assessor, CueFrame, RobotContext, Workspace
 use policies::{Adaptation, PolicyKind, RuleTable, TaskContext, TaskPhase};
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Robot, RobotState};
-use safety::{Supervisor, SupervisorConfig, Verdict, WorldView};
+use safety::{Supervisor, SupervisorConfig, Verdict, Violation, WorldView};
 
+use super::backend::UrPorts;
 use super::config::TrialConfig;
 use super::cues::{CueSource, RecordedCues};
 use super::events::TrialEvent;
@@ -196,6 +197,8 @@ pub(crate) struct Live {
     pub(crate) handovers_done: u32,
     /// Handovers planned.
     pub(crate) handovers: u32,
+    /// While the robot link is lost and a resume is awaited: for how long [s] (wall time).
+    pub(crate) link_down_s: Option<f64>,
 }
 
 /// The robot a trial runs on.
@@ -208,8 +211,24 @@ pub(crate) enum RobotChoice {
         /// Controller cycles per 2 ms of wall time.
         speedup: u32,
     },
-    /// A real UR5e at this address.
-    Ur(String),
+    /// A real UR5e (or `hrc-adapt emulate`) at this address.
+    Ur {
+        /// Host name or IP address.
+        host: String,
+        /// Its RTDE, dashboard and script ports.
+        ports: UrPorts,
+    },
+}
+
+impl RobotChoice {
+    /// A UR5e at `host` on the standard ports.
+    #[cfg(test)]
+    pub(crate) fn ur(host: &str) -> Self {
+        Self::Ur {
+            host: host.to_owned(),
+            ports: UrPorts::default(),
+        }
+    }
 }
 
 /// Where the loop's time comes from.
@@ -219,6 +238,235 @@ enum Clock {
     Mock,
     /// The controller timestamp of each new sample, from the first one.
     Controller,
+}
+
+/// Why a trial ended: `summary.json`'s `finish_reason`, the `Finished` event's reason. The
+/// first three are normal endings (`Ok`, exit code 0); every other one is a [`TrialEnded`]
+/// error with its own exit code ([`exit_code`]; the table is in the README, "Exit codes").
+pub(crate) mod reason {
+    /// Every handover done (the simulated operator finished its task).
+    pub(crate) const COMPLETED: &str = "completed";
+    /// `max_duration_s` of trial time reached.
+    pub(crate) const MAX_DURATION: &str = "max_duration";
+    /// The recorded cue file, or the live camera, ended.
+    pub(crate) const CUES_ENDED: &str = "cues_ended";
+    /// Ctrl-C (the stop flag).
+    pub(crate) const INTERRUPTED: &str = "interrupted";
+    /// No robot state for `[link] lost_after_s`, and no resume (disabled, or the link not back
+    /// within `resume_within_s`).
+    pub(crate) const LINK_LOST: &str = "link_lost";
+    /// A motion phase made no progress toward its target for `[progress] stuck_after_s`.
+    pub(crate) const TASK_IMPOSSIBLE: &str = "task_impossible";
+    /// The robot's control program stopped (pendant, protective stop, watchdog).
+    pub(crate) const ROBOT_PROGRAM_STOPPED: &str = "robot_program_stopped";
+    /// An error inside the loop (a failed read, a log write, a panic, the camera failing).
+    pub(crate) const ERROR: &str = "error";
+}
+
+/// The process exit code of a trial that ended with `reason` (README, "Exit codes").
+pub(crate) fn exit_code(reason: &str) -> u8 {
+    match reason {
+        reason::COMPLETED | reason::MAX_DURATION | reason::CUES_ENDED => 0,
+        reason::LINK_LOST => 3,
+        reason::TASK_IMPOSSIBLE => 4,
+        reason::ROBOT_PROGRAM_STOPPED => 5,
+        reason::INTERRUPTED => 130,
+        _ => 1,
+    }
+}
+
+/// A trial that did not end normally (see [`reason`]): why, where its logs are (`None` if it
+/// ended before the logs were opened, e.g. Ctrl-C at the confirmation prompt) and what went
+/// wrong. Displayed as one line naming both; the cause is its `source`.
+#[derive(Debug)]
+pub(crate) struct TrialEnded {
+    /// The `finish_reason`.
+    pub(crate) reason: &'static str,
+    /// The run folder, with its finished logs.
+    pub(crate) dir: Option<PathBuf>,
+    error: anyhow::Error,
+}
+
+impl TrialEnded {
+    /// A trial stopped before its logs were opened (nothing moved).
+    pub(crate) fn before_start(reason: &'static str, error: anyhow::Error) -> Self {
+        Self {
+            reason,
+            dir: None,
+            error,
+        }
+    }
+
+    /// The process exit code ([`exit_code`]).
+    pub(crate) fn exit_code(&self) -> u8 {
+        exit_code(self.reason)
+    }
+}
+
+impl std::fmt::Display for TrialEnded {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.dir {
+            Some(d) => write!(
+                f,
+                "trial ended: {} (robot stopped; logs in {})",
+                self.reason,
+                d.display()
+            ),
+            None => write!(f, "trial ended before it started: {}", self.reason),
+        }
+    }
+}
+
+impl std::error::Error for TrialEnded {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        Some(self.error.as_ref())
+    }
+}
+
+/// What the trial loop needs of its robot beyond [`Robot`].
+pub(crate) trait TrialRobot: Robot {
+    /// Restarts the robot's control program without blocking (after a link loss its register
+    /// watchdog may have stopped it); `false` when that is not possible now (not supported, or
+    /// a restart is still under way). Called only while a resume is being waited for.
+    fn restart_program(&self) -> bool {
+        false
+    }
+}
+
+impl TrialRobot for LockstepSim {}
+
+/// A robot-io error that means "no new sample now" rather than a failure of the loop: the
+/// link is down or being re-established.
+fn is_link_error(e: &robot_io::RobotIoError) -> bool {
+    matches!(
+        e,
+        robot_io::RobotIoError::LinkDown { .. }
+            | robot_io::RobotIoError::LinkClosed { .. }
+            | robot_io::RobotIoError::Timeout { .. }
+    )
+}
+
+/// The panic message of a caught panic.
+fn panic_message(p: &(dyn std::any::Any + Send)) -> &str {
+    p.downcast_ref::<&str>()
+        .copied()
+        .or_else(|| p.downcast_ref::<String>().map(String::as_str))
+        .unwrap_or("(no message)")
+}
+
+/// Joint distance [rad] under which a motion phase counts as at its target (settling, or
+/// gripping at the pick pose), never stuck.
+const AT_TARGET_RAD: f64 = 0.01;
+/// Progress toward the target [rad] that restarts the stuck timer.
+const PROGRESS_RAD: f64 = 1e-3;
+
+/// Detects a task that cannot be done: in a motion phase (Fetch, Approach, Retreat), the
+/// robot gets no closer to the phase's target (by [`PROGRESS_RAD`], largest joint distance)
+/// for `limit_s` of trial time while not at it. The cause named is the requirement the
+/// supervisor intervened for most often meanwhile (the same stop repeating, e.g. SAF-REQ-007
+/// for a hand held in the protective separation distance, or SAF-REQ-006 for a pose the
+/// workspace limits refuse), else `trajectory` when the trajectory generator failed (an
+/// unreachable target), else `no_progress` (the planner itself held the robot). Allocates
+/// nothing.
+#[derive(Debug, Clone)]
+struct StuckWatch {
+    limit_s: f64,
+    phase: Phase,
+    target: Option<[f64; 6]>,
+    best_rad: f64,
+    since_s: f64,
+    otg_errors_since: u64,
+    /// Interventions since `since_s`, by requirement id.
+    interventions: [(&'static str, u64); 16],
+}
+
+/// What [`StuckWatch`] found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Stuck {
+    /// The phase that made no progress.
+    phase: Phase,
+    /// How long [s].
+    for_s: f64,
+    /// The requirement, `trajectory` or `no_progress`.
+    cause: &'static str,
+    /// Interventions for that requirement meanwhile (0 for the other causes).
+    interventions: u64,
+}
+
+impl StuckWatch {
+    fn new(limit_s: f64) -> Self {
+        Self {
+            limit_s,
+            phase: Phase::Idle,
+            target: None,
+            best_rad: f64::INFINITY,
+            since_s: 0.0,
+            otg_errors_since: 0,
+            interventions: [("", 0); 16],
+        }
+    }
+
+    fn restart(&mut self, t_s: f64, best_rad: f64, otg_errors: u64) {
+        self.best_rad = best_rad;
+        self.since_s = t_s;
+        self.otg_errors_since = otg_errors;
+        self.interventions = [("", 0); 16];
+    }
+
+    /// One cycle at trial time `t_s` [s]: the task `phase` and its `target` [rad], the
+    /// measured joints `q` [rad], the requirement of this cycle's intervention (if any) and
+    /// the controller's trajectory-error count.
+    fn update(
+        &mut self,
+        t_s: f64,
+        phase: Phase,
+        target: Option<&[f64; 6]>,
+        q: &[f64; 6],
+        intervention: Option<&'static str>,
+        otg_errors: u64,
+    ) -> Option<Stuck> {
+        let moving = matches!(phase, Phase::Fetch | Phase::Approach | Phase::Retreat);
+        let d = target.map_or(0.0, |g| {
+            g.iter()
+                .zip(q)
+                .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()))
+        });
+        if phase != self.phase || target.copied() != self.target {
+            self.phase = phase;
+            self.target = target.copied();
+            self.restart(t_s, d, otg_errors);
+            return None;
+        }
+        if !moving || target.is_none() || d <= AT_TARGET_RAD || d < self.best_rad - PROGRESS_RAD {
+            self.restart(t_s, d.min(self.best_rad), otg_errors);
+            return None;
+        }
+        if let Some(id) = intervention {
+            let slot = self
+                .interventions
+                .iter()
+                .position(|(r, _)| *r == id)
+                .or_else(|| self.interventions.iter().position(|(r, _)| r.is_empty()));
+            if let Some(slot) = slot.and_then(|i| self.interventions.get_mut(i)) {
+                *slot = (id, slot.1 + 1);
+            }
+        }
+        let for_s = t_s - self.since_s;
+        if for_s < self.limit_s {
+            return None;
+        }
+        let (cause, interventions) = match self.interventions.iter().max_by_key(|(_, n)| *n) {
+            Some(&(id, n)) if n > 0 => (id, n),
+            _ if otg_errors > self.otg_errors_since => ("trajectory", 0),
+            _ => ("no_progress", 0),
+        };
+        Some(Stuck {
+            phase,
+            for_s,
+            cause,
+            interventions,
+        })
+    }
 }
 
 /// Run one simulated trial into `out_dir` (created), calling `progress` at the cue rate. Stops
@@ -256,45 +504,7 @@ pub(crate) fn run_trial_with_cues(
     stop: &AtomicBool,
     progress: &mut dyn FnMut(&Live),
 ) -> anyhow::Result<PathBuf> {
-    let cfg = &spec.config;
-    let recorded = match cues {
-        CueSource::Recorded(p) => Some(RecordedCues::load(p)?),
-        CueSource::Simulated | CueSource::Camera(_) => None,
-    };
-    let live = match cues {
-        #[cfg(feature = "vision")]
-        CueSource::Camera(spec) => {
-            let spec = super::cues::CameraSpec {
-                require_depth: spec.require_depth || matches!(robot, RobotChoice::Ur(_)),
-                ..spec.clone()
-            };
-            Some(LiveCues::start(&spec, out_dir)?)
-        }
-        #[cfg(not(feature = "vision"))]
-        CueSource::Camera(spec) => return Err(crate::vision_cmd::vision_missing(&spec.input)),
-        CueSource::Simulated | CueSource::Recorded(_) => None,
-    };
-    let workspace = Workspace::from_toml_file(&cfg.workspace)
-        .with_context(|| format!("workspace {}", cfg.workspace.display()))?;
-    let assess_cfg = match &cfg.assess {
-        Some(p) => AssessConfig::from_toml_file(p).with_context(|| format!("{}", p.display()))?,
-        None => AssessConfig::default(),
-    };
-    let raw: RawHandoverFile = toml::from_str(
-        &std::fs::read_to_string(&cfg.controller)
-            .with_context(|| format!("reading {}", cfg.controller.display()))?,
-    )
-    .with_context(|| format!("parsing {}", cfg.controller.display()))?;
-    let ctl_cfg = ControllerConfig::try_from(&raw.controller)?;
-    let table = RuleTable::from_toml_file(&cfg.policy_table)?;
-    let setup = Setup {
-        workspace,
-        assess_cfg,
-        ctl_cfg,
-        table,
-        recorded,
-        live,
-    };
+    let setup = load_setup(spec, robot, cues, out_dir)?;
     let home = setup.ctl_cfg.task.home_q_rad;
     match robot {
         RobotChoice::Sim => {
@@ -329,8 +539,8 @@ pub(crate) fn run_trial_with_cues(
             guard.close();
             out
         }
-        RobotChoice::Ur(host) => {
-            let (robot, guard) = super::backend::connect_ur(host)?;
+        RobotChoice::Ur { host, ports } => {
+            let (robot, guard) = super::backend::connect_ur(host, *ports, stop)?;
             let out = drive(
                 spec,
                 setup,
@@ -345,6 +555,55 @@ pub(crate) fn run_trial_with_cues(
             out
         }
     }
+}
+
+/// Loads everything the trial config names (and starts a live camera) before the robot is
+/// contacted.
+fn load_setup(
+    spec: &TrialSpec,
+    robot: &RobotChoice,
+    cues: &CueSource,
+    out_dir: &Path,
+) -> anyhow::Result<Setup> {
+    let cfg = &spec.config;
+    let recorded = match cues {
+        CueSource::Recorded(p) => Some(RecordedCues::load(p)?),
+        CueSource::Simulated | CueSource::Camera(_) => None,
+    };
+    let live = match cues {
+        #[cfg(feature = "vision")]
+        CueSource::Camera(spec) => {
+            let spec = super::cues::CameraSpec {
+                require_depth: spec.require_depth || matches!(robot, RobotChoice::Ur { .. }),
+                ..spec.clone()
+            };
+            Some(LiveCues::start(&spec, out_dir)?)
+        }
+        #[cfg(not(feature = "vision"))]
+        CueSource::Camera(spec) => return Err(crate::vision_cmd::vision_missing(&spec.input)),
+        CueSource::Simulated | CueSource::Recorded(_) => None,
+    };
+    let workspace = Workspace::from_toml_file(&cfg.workspace)
+        .with_context(|| format!("workspace {}", cfg.workspace.display()))?;
+    let assess_cfg = match &cfg.assess {
+        Some(p) => AssessConfig::from_toml_file(p).with_context(|| format!("{}", p.display()))?,
+        None => AssessConfig::default(),
+    };
+    let raw: RawHandoverFile = toml::from_str(
+        &std::fs::read_to_string(&cfg.controller)
+            .with_context(|| format!("reading {}", cfg.controller.display()))?,
+    )
+    .with_context(|| format!("parsing {}", cfg.controller.display()))?;
+    let ctl_cfg = ControllerConfig::try_from(&raw.controller)?;
+    let table = RuleTable::from_toml_file(&cfg.policy_table)?;
+    Ok(Setup {
+        workspace,
+        assess_cfg,
+        ctl_cfg,
+        table,
+        recorded,
+        live,
+    })
 }
 
 /// Everything loaded from the trial config before the robot is chosen.
@@ -379,7 +638,7 @@ impl LiveCues {
 
 /// The trial loop on any robot.
 #[allow(clippy::too_many_arguments)]
-fn drive<R: Robot>(
+fn drive<R: TrialRobot>(
     spec: &TrialSpec,
     setup: Setup,
     robot: R,
@@ -466,269 +725,519 @@ fn drive<R: Robot>(
         dominant: "none",
         ..Live::default()
     };
-    let mut reason = "max_duration";
+    let mut reason = reason::MAX_DURATION;
 
     let mut k: u64 = 0;
     let mut t0: Option<f64> = None;
     let mut prev_t = 0.0;
     let mut t = 0.0;
-    while k < max_cycles {
-        if stop.load(Ordering::Relaxed) {
-            reason = "interrupted";
-            break;
-        }
-        supervisor.read_state(&mut state)?;
-        let dt = match clock {
-            Clock::Mock => {
-                t = k as f64 * CYCLE_S;
-                CYCLE_S
-            }
-            Clock::Controller => {
-                let start = *t0.get_or_insert(state.timestamp_s);
-                t = state.timestamp_s - start;
-                if t >= cfg.max_duration_s {
-                    break;
-                }
-                if state.runtime_state != robot_io::runtime_state::PLAYING {
-                    // The control program stopped (watchdog, protective stop, pendant):
-                    // nothing we send moves the robot any more.
-                    reason = "robot_program_stopped";
-                    break;
-                }
-                (t - prev_t).max(CYCLE_S)
-            }
-        };
-        prev_t = t;
-        let v = &state.actual_tcp_speed;
-        let acc = ((v[0] - prev_tcp_v[0]).powi(2)
-            + (v[1] - prev_tcp_v[1]).powi(2)
-            + (v[2] - prev_tcp_v[2]).powi(2))
-        .sqrt()
-            / dt;
-        if k > 0 {
-            peak_acc = peak_acc.max(acc);
-        }
-        prev_tcp_v = [v[0], v[1], v[2]];
-
-        // --- 30 Hz: operator → assessor → policy ---
-        // Frame n is due at cycle ceil(n / rate / 2 ms): integer test k·2ms·rate ≥ n.
-        if t * cue_rate + 1e-9 >= next_cue as f64 {
-            let tc = next_cue as f64 / cue_rate;
-            next_cue += 1;
-            let p = &state.actual_tcp_pose;
-            let view = RobotView {
-                phase: controller.phase(),
-                tcp_m: cfg.frame.to_workspace([p[0], p[1], p[2]]),
-                tcp_speed_m_s: (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(),
-                tcp_peak_acc_m_s2: peak_acc,
-            };
-            peak_acc = 0.0;
-            let cue_t = match (recorded.as_mut(), camera.as_mut()) {
-                (Some(r), _) => {
-                    if r.ended(tc) {
-                        reason = "cues_ended";
-                        break;
-                    }
-                    r.hold(tc, &mut frame)
-                }
-                (None, Some(l)) => match l.hold(tc, &mut frame) {
-                    Some(t) => t,
-                    None => {
-                        reason = "cues_ended";
-                        break;
-                    }
-                },
-                (None, None) => {
-                    operator.step(tc, &view, &mut frame);
-                    for e in operator.events() {
-                        log.event(tc, e)?;
-                    }
-                    tc
-                }
-            };
-            frame.robot = RobotContext {
-                collaborating: controller.collaborating(),
-                incomplete: controller.incomplete(),
-            };
-            log.cues(tc, &frame)?;
-            let a = assessor.update(&frame);
-            log.assessment(tc, a, &workspace)?;
-            let confirmed_role = a.confirmed.and_then(&role_of);
-            if confirmed_role == Some(AreaRole::Assembly) {
-                assembly_since.get_or_insert(tc);
-            } else {
-                assembly_since = None;
-            }
-            let ctx = TaskContext {
-                now_s: tc,
-                phase: task_phase(controller.phase()),
-                in_collaboration_area: confirmed_role == Some(AreaRole::Collaboration),
-                in_instruction_area: confirmed_role == Some(AreaRole::Instruction),
-                assembly_dwell_s: assembly_since.map_or(0.0, |s| tc - s),
-            };
-            let adaptation = policy.decide(a, &ctx);
-            log.adaptation(tc, &adaptation)?;
-            if last_indicator != Some(adaptation.reason.indicator) {
-                if last_indicator.is_some() {
-                    log.event(
-                        tc,
-                        &TrialEvent::AdaptationChanged {
-                            indicator: policies::indicator_key(adaptation.reason.indicator),
-                        },
-                    )?;
-                }
-                last_indicator = Some(adaptation.reason.indicator);
-            }
-            motion = motion_adaptation(&adaptation);
-            // Human points in the base frame (head, left hand, right hand).
-            let to_base = |p: &assess::Vec3| cfg.frame.to_base([p.x, p.y, p.z]);
-            humans.head_m = frame.head.as_ref().map(|h| to_base(&h.position));
-            humans.left_hand_m = frame.hands[0].as_ref().map(|h| to_base(&h.position));
-            humans.right_hand_m = frame.hands[1].as_ref().map(|h| to_base(&h.position));
-            // A held recorded or camera frame is as old as its (mapped) time.
-            last_cue_t = cue_t;
-            live.t_s = tc;
-            live.hrc_cwl = a.windowed.hrc_cwl;
-            live.dominant = policies::indicator_key(a.dominant.indicator);
-            live.handovers_done = done;
-            progress(&live);
-            let finished = if simulated {
-                operator.finished()
-            } else {
-                done >= n_handovers
-            };
-            if finished {
-                reason = "completed";
+    // Link loss (controller clock only; see "Link loss" in the module docs).
+    let link_cfg = cfg.link;
+    let mut last_ts = f64::NEG_INFINITY; // the newest robot timestamp seen
+    let mut outage: Option<Outage> = None;
+    let mut stuck = StuckWatch::new(cfg.progress.stuck_after_s);
+    // Why the trial ended, when the reason alone does not say it.
+    let mut detail: Option<String> = None;
+    let hold_cmd = JointCommand::Stop { decel: 3.0 };
+    // The loop runs inside a closure (every `?` and panic leaves it, never `drive`), so the exit
+    // path below always runs: stop the robot, close the camera, finish the logs.
+    let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> anyhow::Result<()> {
+        while k < max_cycles {
+            if stop.load(Ordering::Relaxed) {
+                reason = reason::INTERRUPTED;
                 break;
             }
-        }
-
-        // --- handover scheduling ---
-        let phase = controller.phase();
-        if (phase == Phase::Idle || phase == Phase::Done)
-            && started == done
-            && started < n_handovers
-            && t >= planned_start[started as usize]
-        {
-            if phase == Phase::Done {
-                controller.reset_task();
+            let fresh = match supervisor.read_state(&mut state) {
+                Ok(()) => state.timestamp_s > last_ts,
+                // No new sample now: the supervisor keeps the previous state and counts the
+                // missed cycle (SAF-REQ-009).
+                Err(safety::SafetyError::Robot(e)) if is_link_error(&e) => false,
+                Err(e) => {
+                    return Err(anyhow::Error::new(e).context("reading the robot state failed"));
+                }
+            };
+            if fresh {
+                last_ts = state.timestamp_s;
             }
-            controller.start_handover();
-            started += 1;
-        } else if phase == Phase::Done && controller.task().part_returned() {
-            // The part came back (present timeout): try the same handover again.
-            controller.reset_task();
-            controller.start_handover();
-        }
-
-        // --- 500 Hz: controller → supervisor → robot ---
-        controller.step(t, &state, &motion, &humans, &mut cmd);
-        for ev in controller.events() {
-            match ev.kind {
-                TaskEventKind::PhaseChanged { to, .. } => {
-                    log.event(
-                        t,
-                        &TrialEvent::TaskPhase {
-                            phase: phase_name(to),
-                        },
-                    )?;
-                    if to == Phase::Present {
-                        log.event(t, &TrialEvent::Presented { handover: started })?;
+            let dt = match clock {
+                Clock::Mock => {
+                    t = k as f64 * CYCLE_S;
+                    CYCLE_S
+                }
+                Clock::Controller => {
+                    let now = Instant::now();
+                    if fresh && matches!(supervisor.latched(), Some(Violation::SendFailed)) {
+                        // A send failed while the link was down (SAF-REQ-012); the link is back:
+                        // the reset succeeds once a stop has been delivered since.
+                        let _ = supervisor.reset();
                     }
-                }
-                TaskEventKind::PresentTimeout => {
-                    log.event(t, &TrialEvent::PartReturned { handover: started })?
-                }
-                TaskEventKind::ReleaseConfirmed => {
-                    if simulated {
-                        operator.release_confirmed();
-                        for e in operator.events() {
-                            log.event(t, e)?;
+                    if !fresh && outage.is_none() {
+                        outage = Some(Outage::new(now));
+                    }
+                    let mut resumed = false;
+                    if let Some(o) = outage.as_mut() {
+                        let down_s = now.duration_since(o.since).as_secs_f64();
+                        if o.declared || down_s >= link_cfg.lost_after_s {
+                            if !o.declared {
+                                o.declared = true;
+                                log.event(t, &TrialEvent::Link { up: false })?;
+                                if !link_cfg.resume {
+                                    reason = reason::LINK_LOST;
+                                    detail = Some(format!(
+                                        "no robot state for {down_s:.2} s at t = {t:.3} s (the \
+                                     supervisor stopped the robot); resuming is off ([link] \
+                                     resume = false)"
+                                    ));
+                                    break;
+                                }
+                            }
+                            if down_s >= link_cfg.lost_after_s + link_cfg.resume_within_s {
+                                reason = reason::LINK_LOST;
+                                detail = Some(format!(
+                                    "the robot link lost at t = {t:.3} s was not back within \
+                                 [link] resume_within_s = {} s",
+                                    link_cfg.resume_within_s
+                                ));
+                                break;
+                            }
+                            // The trial is paused: the supervisor holds the robot stopped.
+                            world.now_s = t;
+                            let _ = supervisor.step(&hold_cmd, &world);
+                            let playing = state.runtime_state == robot_io::runtime_state::PLAYING;
+                            let at_rest = state.actual_qd.iter().all(|v| v.abs() < REST_RAD_S);
+                            if fresh && playing && at_rest && supervisor.latched().is_none() {
+                                resumed = true;
+                            } else {
+                                if fresh && !playing && o.restart_due(now) {
+                                    // The controller's watchdog stopped our program meanwhile.
+                                    supervisor.robot().restart_program();
+                                }
+                                o.holds += 1;
+                                if o.holds % 25 == 1 {
+                                    live.link_down_s = Some(down_s);
+                                    progress(&live);
+                                }
+                                continue;
+                            }
+                        } else if fresh {
+                            // A hiccup shorter than a link loss: over.
+                            outage = None;
                         }
-                    } else {
-                        log.event(t, &TrialEvent::Grasped { handover: done + 1 })?;
                     }
-                    done += 1;
+                    if resumed {
+                        // Back: trial time goes on from where it stopped, and the controller
+                        // re-plans from the measured joints.
+                        outage = None;
+                        live.link_down_s = None;
+                        t0 = Some(state.timestamp_s - (prev_t + CYCLE_S));
+                        controller.command_overridden();
+                        log.event(prev_t + CYCLE_S, &TrialEvent::Link { up: true })?;
+                    }
+                    let t_robot = state.timestamp_s - *t0.get_or_insert(state.timestamp_s);
+                    t = if fresh && (k == 0 || t_robot > prev_t) {
+                        t_robot
+                    } else if fresh {
+                        // The robot's clock went back (a restarted controller): re-base.
+                        t0 = Some(state.timestamp_s - (prev_t + CYCLE_S));
+                        prev_t + CYCLE_S
+                    } else {
+                        // A missed sample: this cycle runs on the held state at the predicted
+                        // time; the supervisor stops the robot after 3 of them (SAF-REQ-009).
+                        prev_t + CYCLE_S
+                    };
+                    if t >= cfg.max_duration_s {
+                        break;
+                    }
+                    if fresh && state.runtime_state != robot_io::runtime_state::PLAYING {
+                        // The control program stopped (watchdog, protective stop, pendant):
+                        // nothing we send moves the robot any more.
+                        reason = reason::ROBOT_PROGRAM_STOPPED;
+                        detail = Some(format!(
+                            "the robot's control program stopped at t = {t:.3} s (runtime state {})",
+                            state.runtime_state
+                        ));
+                        break;
+                    }
+                    (t - prev_t).max(CYCLE_S)
                 }
-                TaskEventKind::PartGripped | TaskEventKind::GraspDetected { .. } => {}
+            };
+            prev_t = t;
+            let v = &state.actual_tcp_speed;
+            let acc = ((v[0] - prev_tcp_v[0]).powi(2)
+                + (v[1] - prev_tcp_v[1]).powi(2)
+                + (v[2] - prev_tcp_v[2]).powi(2))
+            .sqrt()
+                / dt;
+            if k > 0 {
+                peak_acc = peak_acc.max(acc);
             }
-        }
-        world.now_s = t;
-        world.human = robot_io::geometry::HumanBody {
-            head_m: humans.head_m,
-            left_hand_m: humans.left_hand_m,
-            right_hand_m: humans.right_hand_m,
-            torso: None,
-        };
-        world.perception_age_s = (t - last_cue_t).max(0.0);
-        world.collaborating = controller.collaborating();
-        let verdict = supervisor.step(&cmd, &world);
-        // A command the supervisor changed was not executed as planned: the controller
-        // re-plans from the measured joints (a reduction by rounding alone does not count).
-        let overridden = match &verdict {
-            Verdict::Passed => false,
-            Verdict::Reduced { scale, .. } => *scale < 1.0 - 1e-6,
-            Verdict::Stopped { .. } | Verdict::Halted { .. } => true,
-        };
-        if overridden {
-            controller.command_overridden();
-        }
-        let pair = (
-            verdict_kind(&verdict),
-            verdict.requirement().map_or("none", |r| r.id()),
-        );
-        if let Some((onset, (reaction, requirement))) = safety_events.update(t, pair) {
-            log.event(
-                onset,
-                &TrialEvent::Safety {
-                    reaction,
-                    requirement,
-                },
-            )?;
-        }
-        log.robot_state(t, &state)?;
-        log.command(t, &cmd, &verdict)?;
-        log.human_distance(
-            t,
-            min_human_distance_m(&humans, controller.control_points()),
-        )?;
-        k += 1;
-    }
+            prev_tcp_v = [v[0], v[1], v[2]];
 
-    // Stop the robot through the supervisor (a few cycles of stop commands), then close.
+            // --- 30 Hz: operator → assessor → policy ---
+            // Frame n is due at cycle ceil(n / rate / 2 ms): integer test k·2ms·rate ≥ n.
+            if t * cue_rate + 1e-9 >= next_cue as f64 {
+                let tc = next_cue as f64 / cue_rate;
+                next_cue += 1;
+                let p = &state.actual_tcp_pose;
+                let view = RobotView {
+                    phase: controller.phase(),
+                    tcp_m: cfg.frame.to_workspace([p[0], p[1], p[2]]),
+                    tcp_speed_m_s: (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(),
+                    tcp_peak_acc_m_s2: peak_acc,
+                };
+                peak_acc = 0.0;
+                let cue_t = match (recorded.as_mut(), camera.as_mut()) {
+                    (Some(r), _) => {
+                        if r.ended(tc) {
+                            reason = "cues_ended";
+                            break;
+                        }
+                        r.hold(tc, &mut frame)
+                    }
+                    (None, Some(l)) => match l.hold(tc, &mut frame) {
+                        Some(t) => t,
+                        None => {
+                            reason = "cues_ended";
+                            break;
+                        }
+                    },
+                    (None, None) => {
+                        operator.step(tc, &view, &mut frame);
+                        for e in operator.events() {
+                            log.event(tc, e)?;
+                        }
+                        tc
+                    }
+                };
+                frame.robot = RobotContext {
+                    collaborating: controller.collaborating(),
+                    incomplete: controller.incomplete(),
+                };
+                log.cues(tc, &frame)?;
+                let a = assessor.update(&frame);
+                log.assessment(tc, a, &workspace)?;
+                let confirmed_role = a.confirmed.and_then(&role_of);
+                if confirmed_role == Some(AreaRole::Assembly) {
+                    assembly_since.get_or_insert(tc);
+                } else {
+                    assembly_since = None;
+                }
+                let ctx = TaskContext {
+                    now_s: tc,
+                    phase: task_phase(controller.phase()),
+                    in_collaboration_area: confirmed_role == Some(AreaRole::Collaboration),
+                    in_instruction_area: confirmed_role == Some(AreaRole::Instruction),
+                    assembly_dwell_s: assembly_since.map_or(0.0, |s| tc - s),
+                };
+                let adaptation = policy.decide(a, &ctx);
+                log.adaptation(tc, &adaptation)?;
+                if last_indicator != Some(adaptation.reason.indicator) {
+                    if last_indicator.is_some() {
+                        log.event(
+                            tc,
+                            &TrialEvent::AdaptationChanged {
+                                indicator: policies::indicator_key(adaptation.reason.indicator),
+                            },
+                        )?;
+                    }
+                    last_indicator = Some(adaptation.reason.indicator);
+                }
+                motion = motion_adaptation(&adaptation);
+                // Human points in the base frame (head, left hand, right hand).
+                let to_base = |p: &assess::Vec3| cfg.frame.to_base([p.x, p.y, p.z]);
+                humans.head_m = frame.head.as_ref().map(|h| to_base(&h.position));
+                humans.left_hand_m = frame.hands[0].as_ref().map(|h| to_base(&h.position));
+                humans.right_hand_m = frame.hands[1].as_ref().map(|h| to_base(&h.position));
+                // A held recorded or camera frame is as old as its (mapped) time.
+                last_cue_t = cue_t;
+                live.t_s = tc;
+                live.hrc_cwl = a.windowed.hrc_cwl;
+                live.dominant = policies::indicator_key(a.dominant.indicator);
+                live.handovers_done = done;
+                progress(&live);
+                let finished = if simulated {
+                    operator.finished()
+                } else {
+                    done >= n_handovers
+                };
+                if finished {
+                    reason = "completed";
+                    break;
+                }
+            }
+
+            // --- handover scheduling ---
+            let phase = controller.phase();
+            if (phase == Phase::Idle || phase == Phase::Done)
+                && started == done
+                && started < n_handovers
+                && t >= planned_start[started as usize]
+            {
+                if phase == Phase::Done {
+                    controller.reset_task();
+                }
+                controller.start_handover();
+                started += 1;
+            } else if phase == Phase::Done && controller.task().part_returned() {
+                // The part came back (present timeout): try the same handover again.
+                controller.reset_task();
+                controller.start_handover();
+            }
+
+            // --- 500 Hz: controller → supervisor → robot ---
+            controller.step(t, &state, &motion, &humans, &mut cmd);
+            for ev in controller.events() {
+                match ev.kind {
+                    TaskEventKind::PhaseChanged { to, .. } => {
+                        log.event(
+                            t,
+                            &TrialEvent::TaskPhase {
+                                phase: phase_name(to),
+                            },
+                        )?;
+                        if to == Phase::Present {
+                            log.event(t, &TrialEvent::Presented { handover: started })?;
+                        }
+                    }
+                    TaskEventKind::PresentTimeout => {
+                        log.event(t, &TrialEvent::PartReturned { handover: started })?
+                    }
+                    TaskEventKind::ReleaseConfirmed => {
+                        if simulated {
+                            operator.release_confirmed();
+                            for e in operator.events() {
+                                log.event(t, e)?;
+                            }
+                        } else {
+                            log.event(t, &TrialEvent::Grasped { handover: done + 1 })?;
+                        }
+                        done += 1;
+                    }
+                    TaskEventKind::PartGripped | TaskEventKind::GraspDetected { .. } => {}
+                }
+            }
+            world.now_s = t;
+            world.human = robot_io::geometry::HumanBody {
+                head_m: humans.head_m,
+                left_hand_m: humans.left_hand_m,
+                right_hand_m: humans.right_hand_m,
+                torso: None,
+            };
+            world.perception_age_s = (t - last_cue_t).max(0.0);
+            world.collaborating = controller.collaborating();
+            let verdict = supervisor.step(&cmd, &world);
+            // A command the supervisor changed was not executed as planned: the controller
+            // re-plans from the measured joints (a reduction by rounding alone does not count).
+            let overridden = match &verdict {
+                Verdict::Passed => false,
+                Verdict::Reduced { scale, .. } => *scale < 1.0 - 1e-6,
+                Verdict::Stopped { .. } | Verdict::Halted { .. } => true,
+            };
+            if overridden {
+                controller.command_overridden();
+            }
+            let pair = (
+                verdict_kind(&verdict),
+                verdict.requirement().map_or("none", |r| r.id()),
+            );
+            if let Some((onset, (reaction, requirement))) = safety_events.update(t, pair) {
+                log.event(
+                    onset,
+                    &TrialEvent::Safety {
+                        reaction,
+                        requirement,
+                    },
+                )?;
+            }
+            if fresh {
+                // A held state is no new robot sample: robot.csv keeps the robot's own.
+                log.robot_state(t, &state)?;
+            }
+            log.command(t, &cmd, &verdict)?;
+            log.human_distance(
+                t,
+                min_human_distance_m(&humans, controller.control_points()),
+            )?;
+            let intervention = match &verdict {
+                Verdict::Passed => None,
+                v => v.requirement().map(|r| r.id()),
+            };
+            if let Some(s) = stuck.update(
+                t,
+                controller.phase(),
+                controller.task().target_q_rad(),
+                &state.actual_q,
+                intervention,
+                controller.stats().otg_errors,
+            ) {
+                reason = reason::TASK_IMPOSSIBLE;
+                detail = Some(s.describe(t));
+                break;
+            }
+            k += 1;
+        }
+        Ok(())
+    }));
+
+    // --- The one exit path: every ending comes here. ---
+    let mut failure: Option<anyhow::Error> = match run {
+        Ok(Ok(())) => None,
+        Ok(Err(e)) => Some(e),
+        Err(p) => Some(anyhow::anyhow!(
+            "the trial loop panicked: {}",
+            panic_message(p.as_ref())
+        )),
+    };
+    if failure.is_some() {
+        reason = reason::ERROR;
+    }
+    // 1. Stop the robot through the supervisor.
     let t_end = match clock {
         Clock::Mock => k as f64 * CYCLE_S,
         Clock::Controller => t + CYCLE_S,
     };
+    let stopped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        stop_robot(&mut supervisor, &mut state, &mut world, t_end);
+    }));
+    if let Err(p) = stopped {
+        let e = anyhow::anyhow!(
+            "stopping the robot through the supervisor panicked: {}",
+            panic_message(p.as_ref())
+        );
+        reason = reason::ERROR;
+        failure = Some(match failure.take() {
+            Some(f) => f.context(format!("{e:#}")),
+            None => e,
+        });
+    }
+    // 2. The camera thread (an error or a panic there ended the cues: "cues_ended").
+    if let Some(camera) = camera.take()
+        && let Err(e) = camera.finish()
+        && failure.is_none()
+    {
+        reason = reason::ERROR;
+        failure = Some(e.context("the live camera failed"));
+    }
+    // 3. Every log, with the reason.
+    let event = log.event(t_end, &TrialEvent::Finished { reason });
+    let finished = log.finish();
+    let dir = match event.and(finished) {
+        Ok(files) => files.dir,
+        Err(e) => {
+            let e = e.context(format!(
+                "cannot finish the trial log in {}",
+                out_dir.display()
+            ));
+            failure = Some(match failure.take() {
+                Some(f) => f.context(format!("{e:#}")),
+                None => e,
+            });
+            reason = reason::ERROR;
+            out_dir.to_path_buf()
+        }
+    };
+    if exit_code(reason) == 0 && failure.is_none() {
+        return Ok(dir);
+    }
+    let error = failure.unwrap_or_else(|| {
+        anyhow::anyhow!(detail.unwrap_or_else(|| match reason {
+            reason::INTERRUPTED => "interrupted (Ctrl-C)".to_owned(),
+            r => r.to_owned(),
+        }))
+    });
+    Err(TrialEnded {
+        reason,
+        dir: Some(dir),
+        error,
+    }
+    .into())
+}
+
+/// Joint speed [rad/s] under which the arm counts as at rest (to resume after a link loss).
+const REST_RAD_S: f64 = 0.01;
+
+/// A stretch without a new robot state (controller clock).
+#[derive(Debug, Clone, Copy)]
+struct Outage {
+    /// When the last fresh sample was followed by none.
+    since: Instant,
+    /// Longer than `[link] lost_after_s`: a link loss (the trial is paused).
+    declared: bool,
+    /// The last program restart asked for.
+    last_restart: Option<Instant>,
+    /// Paused cycles so far.
+    holds: u64,
+}
+
+impl Outage {
+    fn new(now: Instant) -> Self {
+        Self {
+            since: now,
+            declared: false,
+            last_restart: None,
+            holds: 0,
+        }
+    }
+
+    /// Whether to ask for a program restart now (at most once a second).
+    fn restart_due(&mut self, now: Instant) -> bool {
+        let due = self
+            .last_restart
+            .is_none_or(|l| now.duration_since(l) >= Duration::from_secs(1));
+        if due {
+            self.last_restart = Some(now);
+        }
+        due
+    }
+}
+
+impl Stuck {
+    /// The error message of a `task_impossible` ending at trial time `t_s` [s].
+    fn describe(&self, t_s: f64) -> String {
+        let why = match self.cause {
+            "trajectory" => "the trajectory generator could not plan a motion to it".to_owned(),
+            "no_progress" => "the planner held the robot".to_owned(),
+            id => format!(
+                "the safety supervisor intervened {} times for {id} meanwhile",
+                self.interventions
+            ),
+        };
+        format!(
+            "task impossible ({}): in {}, the robot got no closer to its target for {:.1} s \
+             (until t = {t_s:.3} s); {why}",
+            self.cause,
+            phase_name(self.phase),
+            self.for_s
+        )
+    }
+}
+
+/// Stops the robot through the supervisor: stop commands until a fresh state shows the arm at
+/// rest, for at most 250 cycles, or until 25 cycles in a row bring no fresh state (the link is
+/// gone: nothing more can be done from here).
+fn stop_robot<R: Robot>(
+    supervisor: &mut Supervisor<R>,
+    state: &mut RobotState,
+    world: &mut WorldView,
+    t_end: f64,
+) {
     let stop_cmd = JointCommand::Stop { decel: 3.0 };
+    let mut last_ts = state.timestamp_s;
+    let mut missing = 0u32;
     for j in 0..250u64 {
-        supervisor.read_state(&mut state)?;
-        let t = t_end + j as f64 * CYCLE_S;
-        world.now_s = t;
-        supervisor.step(&stop_cmd, &world);
-        if state.actual_qd.iter().all(|q| q.abs() < 1e-6) {
+        let fresh = supervisor.read_state(state).is_ok() && state.timestamp_s > last_ts;
+        if fresh {
+            last_ts = state.timestamp_s;
+            missing = 0;
+        } else {
+            missing += 1;
+        }
+        world.now_s = t_end + j as f64 * CYCLE_S;
+        let _ = supervisor.step(&stop_cmd, world);
+        if (fresh && state.actual_qd.iter().all(|q| q.abs() < 1e-6)) || missing >= 25 {
             break;
         }
     }
-    log.event(t_end, &TrialEvent::Finished { reason })?;
-    let dir = log.finish()?.dir;
-    if let Some(camera) = camera {
-        // The camera or the inference failed: the trial ended early ("cues_ended").
-        camera.finish().with_context(|| {
-            format!(
-                "the live camera failed; the logs up to then are in {}",
-                dir.display()
-            )
-        })?;
-    }
-    anyhow::ensure!(
-        reason != "robot_program_stopped",
-        "the robot's control program stopped at t = {t:.3} s (runtime state {}); the logs up \
-         to then are in {}",
-        state.runtime_state,
-        dir.display()
-    );
-    Ok(dir)
 }
 
 /// The minimum distance between a tracked human point (head, hands; base frame) and the
@@ -1009,3 +1518,7 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "runtime_exit_tests.rs"]
+mod exit_tests;

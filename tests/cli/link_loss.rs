@@ -1,0 +1,298 @@
+//! `hrc-adapt trial --robot 127.0.0.1` against `hrc-adapt emulate --sim` running as a separate
+//! process on ephemeral ports (real time, speed-up 1), the emulator stopped with SIGSTOP for
+//! 5 s or killed with SIGKILL mid-trial (issue 10, Acceptance). Each case checks the exit code
+//! (README, "Exit codes"), that the run folder is printed and that its logs are finished with
+//! the reason.
+//!
+//! The trial is a short L1 trial whose first fetch starts at once; the emulator is stopped once
+//! the trial has logged a second of robot state. The only fixed wait is the 5 s SIGSTOP the
+//! acceptance asks for.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_hrc-adapt");
+/// Every wait of these tests is bounded by this.
+const DEADLINE: Duration = Duration::from_secs(120);
+
+/// `hrc-adapt emulate --sim` on ephemeral ports; killed when dropped.
+struct Emulate {
+    child: Child,
+    rtde: u16,
+    dashboard: u16,
+    script: u16,
+}
+
+/// The port of `label 127.0.0.1:PORT` in the emulator's start-up line.
+fn port_after(line: &str, label: &str) -> u16 {
+    let rest = &line[line
+        .find(label)
+        .unwrap_or_else(|| panic!("{label} in {line}"))
+        + label.len()..];
+    let addr = rest.trim_start().split([',', ' ', ';']).next().unwrap();
+    addr.rsplit(':').next().unwrap().parse().unwrap()
+}
+
+impl Emulate {
+    fn start() -> Emulate {
+        let mut child = Command::new(BIN)
+            .args(["emulate", "--sim", "--speedup", "1"])
+            .args(["--rtde-port", "0", "--dashboard-port", "0"])
+            .args(["--secondary-port", "0", "--realtime-port", "0"])
+            .env("RUST_LOG", "warn")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start hrc-adapt emulate");
+        let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+        let line = loop {
+            let line = lines.next().expect("the emulator exited").unwrap();
+            if line.starts_with("emulating a UR controller") {
+                break line;
+            }
+        };
+        // Keep draining stderr so the emulator never blocks on a full pipe.
+        std::thread::spawn(move || lines.for_each(drop));
+        Emulate {
+            rtde: port_after(&line, "rtde"),
+            dashboard: port_after(&line, "dashboard"),
+            script: port_after(&line, "script"),
+            child,
+        }
+    }
+
+    fn signal(&self, sig: &str) {
+        let ok = Command::new("kill")
+            .args([sig, &self.child.id().to_string()])
+            .status()
+            .unwrap()
+            .success();
+        assert!(ok, "kill {sig}");
+    }
+}
+
+impl Drop for Emulate {
+    fn drop(&mut self) {
+        let _ = self.child.kill(); // SIGKILL works on a stopped process too
+        let _ = self.child.wait();
+    }
+}
+
+/// The shipped trial config with absolute paths, a 6 s L1 trial whose first fetch starts at
+/// once, and `[link] resume = resume`.
+fn trial_config(dir: &Path, resume: bool) -> PathBuf {
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+    let mut text = std::fs::read_to_string(config.join("trial.toml")).unwrap();
+    for file in [
+        "example-workspace.toml",
+        "handover.toml",
+        "policy-adaptive.toml",
+        "assess.toml",
+    ] {
+        let abs = config.join(file);
+        text = text.replace(
+            &format!("\"{file}\""),
+            &format!("{:?}", abs.display().to_string()),
+        );
+    }
+    let set = |text: String, key: &str, value: &str| -> String {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with(&format!("{key} = ")))
+            .unwrap_or_else(|| panic!("{key} in config/trial.toml"))
+            .to_owned();
+        text.replace(&line, &format!("{key} = {value}"))
+    };
+    text = set(text, "max_duration_s", "6.0");
+    text = set(text, "lead_time_s", "60.0");
+    text = set(text, "resume", if resume { "true" } else { "false" });
+    text = set(text, "resume_within_s", "30.0");
+    let path = dir.join("trial.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// A running `hrc-adapt trial` on the emulator process.
+struct Trial {
+    child: Child,
+    out_root: PathBuf,
+}
+
+impl Trial {
+    fn start(emu: &Emulate, dir: &Path, resume: bool) -> Trial {
+        let out_root = dir.join("runs");
+        let mut child = Command::new(BIN)
+            .args(["trial", "--robot", "127.0.0.1", "--condition", "L1"])
+            .args(["--participant", "P01", "--seed", "1"])
+            .arg("--config")
+            .arg(trial_config(dir, resume))
+            .arg("--out-root")
+            .arg(&out_root)
+            .args(["--rtde-port", &emu.rtde.to_string()])
+            .args(["--dashboard-port", &emu.dashboard.to_string()])
+            .args(["--script-port", &emu.script.to_string()])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start hrc-adapt trial");
+        // The UR5e confirmation prompt.
+        child.stdin.take().unwrap().write_all(b"yes\n").unwrap();
+        Trial { child, out_root }
+    }
+
+    /// Waits until the trial has logged more than a second of robot state (robot.csv holds
+    /// a first chunk: about 100 rows).
+    fn wait_until_running(&mut self) {
+        let start = Instant::now();
+        loop {
+            let rows = std::fs::read_dir(&self.out_root)
+                .into_iter()
+                .flatten()
+                .flatten()
+                .map(|e| e.path().join("robot.csv"))
+                .find_map(|p| std::fs::read_to_string(p).ok())
+                .map_or(0, |t| t.lines().count());
+            if rows > 100 {
+                return;
+            }
+            if let Some(status) = self.child.try_wait().unwrap() {
+                panic!("the trial ended before it ran: {status}: {}", self.stderr());
+            }
+            assert!(start.elapsed() < DEADLINE, "the trial never got going");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    fn stderr(&mut self) -> String {
+        let mut s = String::new();
+        if let Some(mut e) = self.child.stderr.take() {
+            let _ = e.read_to_string(&mut s);
+        }
+        s
+    }
+
+    /// Waits for the trial's end: its exit status, its stdout and its stderr.
+    fn wait(mut self) -> (ExitStatus, String, String) {
+        let start = Instant::now();
+        let mut stdout = self.child.stdout.take().unwrap();
+        let mut stderr = self.child.stderr.take().unwrap();
+        let out = std::thread::spawn(move || {
+            let mut s = String::new();
+            let _ = stdout.read_to_string(&mut s);
+            s
+        });
+        let err = std::thread::spawn(move || {
+            let mut s = String::new();
+            let _ = stderr.read_to_string(&mut s);
+            s
+        });
+        let status = loop {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                break status;
+            }
+            if start.elapsed() > DEADLINE {
+                let _ = self.child.kill();
+                panic!("the trial did not end");
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        (status, out.join().unwrap(), err.join().unwrap())
+    }
+}
+
+/// The run folder the trial printed (the last line on stdout), with every file finished.
+fn run_folder(stdout: &str, stderr: &str) -> PathBuf {
+    let dir = PathBuf::from(
+        stdout
+            .lines()
+            .last()
+            .unwrap_or_else(|| panic!("no run folder printed; stderr: {stderr}")),
+    );
+    for f in [
+        "trial.mcap",
+        "indicators.csv",
+        "robot.csv",
+        "summary.json",
+        "report.html",
+    ] {
+        assert!(dir.join(f).is_file(), "{f} missing in {}", dir.display());
+    }
+    dir
+}
+
+fn summary(dir: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+/// The `event` names on `/task/events`.
+fn task_events(dir: &Path) -> Vec<String> {
+    let bytes = std::fs::read(dir.join("trial.mcap")).unwrap();
+    mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(Result::unwrap)
+        .filter(|m| m.channel.topic == "/task/events")
+        .map(|m| {
+            let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+            v["event"].as_str().unwrap().to_owned()
+        })
+        .collect()
+}
+
+#[test]
+fn sigstop_5_s_with_resume_the_trial_resumes_and_completes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let emu = Emulate::start();
+    let mut trial = Trial::start(&emu, tmp.path(), true);
+    trial.wait_until_running();
+    emu.signal("-STOP");
+    std::thread::sleep(Duration::from_secs(5));
+    emu.signal("-CONT");
+    let (status, stdout, stderr) = trial.wait();
+    assert_eq!(status.code(), Some(0), "{stderr}");
+    let dir = run_folder(&stdout, &stderr);
+    assert_eq!(summary(&dir)["finish_reason"], "max_duration", "{stderr}");
+    let ev = task_events(&dir);
+    let lost = ev.iter().position(|e| e == "link_lost").expect("link lost");
+    let back = ev
+        .iter()
+        .position(|e| e == "link_restored")
+        .expect("link restored");
+    assert!(lost < back, "{ev:?}");
+}
+
+#[test]
+fn sigstop_without_resume_ends_as_link_lost_with_exit_code_3() {
+    let tmp = tempfile::tempdir().unwrap();
+    let emu = Emulate::start();
+    let mut trial = Trial::start(&emu, tmp.path(), false);
+    trial.wait_until_running();
+    emu.signal("-STOP");
+    // No resume: the trial ends while the emulator is still stopped (0.5 s without state).
+    let (status, stdout, stderr) = trial.wait();
+    emu.signal("-CONT");
+    assert_eq!(status.code(), Some(3), "{stderr}");
+    assert!(
+        stderr.contains("link_lost") && stderr.contains("no robot state"),
+        "{stderr}"
+    );
+    let dir = run_folder(&stdout, &stderr);
+    assert_eq!(summary(&dir)["finish_reason"], "link_lost");
+    assert!(task_events(&dir).contains(&"link_lost".to_owned()));
+}
+
+#[test]
+fn sigkill_ends_as_link_lost_with_exit_code_3() {
+    let tmp = tempfile::tempdir().unwrap();
+    let emu = Emulate::start();
+    let mut trial = Trial::start(&emu, tmp.path(), false);
+    trial.wait_until_running();
+    emu.signal("-KILL");
+    let (status, stdout, stderr) = trial.wait();
+    assert_eq!(status.code(), Some(3), "{stderr}");
+    let dir = run_folder(&stdout, &stderr);
+    assert_eq!(summary(&dir)["finish_reason"], "link_lost");
+}
