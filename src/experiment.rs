@@ -374,7 +374,8 @@ fn run_real_session(args: &ExperimentArgs, participant: &str) -> anyhow::Result<
     // Trial logs: errors and the trial's own warnings only, as `hrc-adapt trial` does.
     let _log = crate::trial::scoped_log(crate::trial::TRIAL_LOG);
     // Ctrl-C during a trial stops that trial through the supervisor (the flag is cleared
-    // before each trial); at a prompt, answer `quit`.
+    // before and after each trial); at a prompt it ends the session (nothing moves, every
+    // rating entered is kept).
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
     crate::trial::install_ctrl_c(stop.clone());
     let show = std::io::stderr().is_terminal();
@@ -392,20 +393,37 @@ fn run_real_session(args: &ExperimentArgs, participant: &str) -> anyhow::Result<
             runtime::update_bar(&bar, l)
         });
         bar.finish_and_clear();
-        if stop.load(std::sync::atomic::Ordering::Relaxed) {
+        if stop.swap(false, std::sync::atomic::Ordering::Relaxed) {
             eprintln!("interrupted: robot stopped, logs closed");
         }
         result
     };
-    // Not a held `stdin().lock()`: the UR5e backend reads its own confirmation from stdin.
-    let mut input = std::io::BufReader::new(std::io::stdin());
+    // The prompts read stdin through the process's one prompt reader (the UR5e backend's
+    // `yes` too), and a Ctrl-C ends them.
+    let mut input = crate::trial::prompt::PromptInput::stdin(&stop);
     let record = session::run_session(
         &trials,
         &dir,
         &mut input,
         &mut std::io::stdout(),
         &mut run_trial,
-    )?;
+    )
+    .map_err(|e| {
+        if crate::trial::prompt::is_interrupted(&e) {
+            // Exit code 130, as a trial's Ctrl-C (README, "Exit codes").
+            runtime::TrialEnded::before_start(
+                runtime::reason::INTERRUPTED,
+                e.context(format!(
+                    "session interrupted at a prompt; nothing moved; everything entered is \
+                     in {}",
+                    dir.display()
+                )),
+            )
+            .into()
+        } else {
+            e
+        }
+    })?;
     if record.quit {
         eprintln!(
             "session quit early; everything entered is in {}",

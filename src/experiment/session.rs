@@ -10,7 +10,10 @@
 //!   [`crate::stats::raw_tlx`]; a bad answer is asked again);
 //! - `pause` waits for Enter, then asks again;
 //! - `skip` leaves the trial out and goes on;
-//! - `quit` (or the end of the input) ends the session.
+//! - `quit` (or the end of the input) ends the session;
+//! - Ctrl-C at any prompt ends it too, with an error that says "interrupted": the binary reads
+//!   the answers through [`crate::trial::prompt::PromptInput`], whose reads fail once the stop
+//!   flag is set, and that error ends [`run_session`] before anything else runs.
 //!
 //! Every rating row is appended to `nasa_tlx.csv` in the session folder and flushed at once, so
 //! a quit (or a crash) keeps everything entered. A failed trial is reported, gets no ratings and

@@ -269,6 +269,51 @@ fn guided_session_follows_the_script_and_appends_the_ratings() {
 }
 
 #[test]
+fn ctrl_c_at_a_session_prompt_ends_the_session_and_runs_nothing() {
+    // At a077dd5 the session read stdin directly: a Ctrl-C (which only sets the flag) was
+    // ignored at its prompts. Here the answers never come and the flag is set.
+    struct Never;
+    impl std::io::Read for Never {
+        fn read(&mut self, _: &mut [u8]) -> std::io::Result<usize> {
+            loop {
+                std::thread::park();
+            }
+        }
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let trials = six_trials();
+    let stop = std::sync::atomic::AtomicBool::new(true);
+    let mut input = crate::trial::prompt::PromptInput::spawn(std::io::BufReader::new(Never), &stop);
+    let mut out = Vec::new();
+    let mut ran = 0;
+    let e = session::run_session(&trials, tmp.path(), &mut input, &mut out, &mut |_, f| {
+        ran += 1;
+        Ok(f.to_path_buf())
+    })
+    .unwrap_err();
+    assert!(crate::trial::prompt::is_interrupted(&e), "{e:#}");
+    assert!(format!("{e:#}").contains("interrupted"), "{e:#}");
+    assert_eq!(ran, 0);
+    assert!(!tmp.path().join(session::TLX_FILE).exists());
+    // Also at the ratings: the trial ran, then the flag was set (Ctrl-C at the TLX prompt).
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    let mut input = crate::trial::prompt::PromptInput::spawn(
+        std::io::Read::chain(
+            std::io::Cursor::new("start\n5\n"),
+            std::io::BufReader::new(Never),
+        ),
+        &stop,
+    );
+    let e = session::run_session(&trials, tmp.path(), &mut input, &mut out, &mut |_, f| {
+        stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        Ok(f.to_path_buf())
+    })
+    .unwrap_err();
+    assert!(crate::trial::prompt::is_interrupted(&e), "{e:#}");
+    assert!(!tmp.path().join(session::TLX_FILE).exists());
+}
+
+#[test]
 fn a_real_session_runs_the_participants_schedule_rows() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/experiment-ab.toml");
     let cfg = ExperimentConfig::from_file(&path).unwrap();

@@ -24,9 +24,8 @@
 //! meanwhile, the runtime asks for it again through [`TrialRobot::restart_program`], which
 //! re-sends it through a `ScriptSender` on the tokio runtime without blocking the loop.
 
-use std::io::BufRead as _;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
@@ -269,33 +268,6 @@ pub(crate) fn start_emulator(
     ))
 }
 
-/// Reads one line from stdin, giving up when `stop` is set (Ctrl-C): `None` then. The line is
-/// read in a helper thread (a blocked read cannot be interrupted); after an interruption it
-/// stays blocked until stdin gives a line or closes, and that line is lost.
-fn read_line_or_stop(stop: &AtomicBool) -> anyhow::Result<Option<String>> {
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::Builder::new()
-        .name("confirmation".into())
-        .spawn(move || {
-            let mut line = String::new();
-            let r = std::io::stdin().lock().read_line(&mut line).map(|_| line);
-            let _ = tx.send(r);
-        })
-        .context("cannot start the stdin reader")?;
-    loop {
-        if stop.load(Ordering::Relaxed) {
-            return Ok(None);
-        }
-        match rx.recv_timeout(Duration::from_millis(50)) {
-            Ok(r) => return Ok(Some(r.context("reading the confirmation")?)),
-            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
-            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-                anyhow::bail!("the stdin reader ended without a line")
-            }
-        }
-    }
-}
-
 /// A real UR5e at `host` (or `hrc-adapt emulate` there, on `ports`). Connects the
 /// dashboard, prints the robot mode, safety status and remote-control state, refuses unless
 /// the robot is in remote control with a normal safety status, asks for confirmation on
@@ -329,7 +301,7 @@ pub(crate) fn connect_ur(
     eprint!(
         "The robot will move. Keep the workspace clear except for the operator. Type `yes` to start: "
     );
-    let Some(line) = read_line_or_stop(stop)? else {
+    let Some(line) = super::prompt::read_line_or_stop(stop)? else {
         eprintln!();
         return Err(super::runtime::TrialEnded::before_start(
             "interrupted",

@@ -22,6 +22,7 @@ mod events;
 mod live;
 mod log;
 pub(crate) mod operator;
+pub(crate) mod prompt;
 mod report;
 pub(crate) mod runtime;
 
