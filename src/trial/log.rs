@@ -4,7 +4,7 @@
 //! - at the camera rate (30 Hz): [`TrialLog::cues`], [`TrialLog::assessment`],
 //!   [`TrialLog::adaptation`];
 //! - at the control rate (500 Hz): [`TrialLog::robot_state`], [`TrialLog::command`],
-//!   [`TrialLog::human_distance`], and [`TrialLog::event`] from anywhere;
+//!   [`TrialLog::cycle`], [`TrialLog::human_distance`], and [`TrialLog::event`] from anywhere;
 //!
 //! and [`TrialLog::finish`] closes it and writes the summary and the report.
 //!
@@ -16,7 +16,8 @@
 //! - `indicators.csv`: the `hrc-adapt assess` table (`report::table`), one row per assessment.
 //! - `robot.csv`: ur_rtde-style trace (`robot_io::trace::TraceWriter`, [`STATE_FIELD_NAMES`]),
 //!   readable back by `robot_io::trace::Trace::read` and so by `ReplayRobot`.
-//! - `summary.json`: `log_summary.rs`.
+//! - `summary.json`: `log_summary.rs`; its `motion` object comes from `motion_metrics.rs`,
+//!   fed with every raw control-rate record (before any decimation or debouncing).
 //! - `report.html` and its PNG plots: `report.rs`.
 //!
 //! Robot state goes to `/robot/state` and `robot.csv` decimated to 100 Hz (one sample per
@@ -36,8 +37,9 @@
 //!
 //! # Threads and the control path
 //! The control-rate methods only copy a `Copy` record into a ring preallocated at
-//! [`TrialLog::create`] ([`LogOptions::ring_capacity`] records): no allocation, no formatting, no
-//! I/O. The ring is drained (formatted, compressed, written) by the next camera-rate call, and
+//! [`TrialLog::create`] ([`LogOptions::ring_capacity`] records) and update the streaming
+//! motion metrics (`motion_metrics.rs`: O(1) per record, buffers preallocated): no allocation,
+//! no formatting, no I/O. The ring is drained (formatted, compressed, written) by the next camera-rate call, and
 //! by [`TrialLog::finish`]. This is a **buffered synchronous writer**: right for the simulated
 //! trial (one thread, mock clock), where draining happens between control cycles. Should the
 //! ring fill before a camera-rate call drains it, the control-rate call drains it itself (counted
@@ -48,6 +50,8 @@
 
 #[path = "log_mcap.rs"]
 pub(crate) mod mcap_out;
+#[path = "motion_metrics.rs"]
+pub(crate) mod motion;
 #[path = "log_summary.rs"]
 pub(crate) mod summary;
 #[cfg(test)]
@@ -69,6 +73,8 @@ use super::events::TrialEvent;
 use super::report;
 use super::report::assess_report::table::IndicatorTable;
 use mcap_out::ch;
+pub(crate) use motion::CycleRecord;
+use motion::MotionMetrics;
 use summary::FrameRecord;
 
 /// The MCAP file, inside the run folder.
@@ -174,6 +180,8 @@ enum HotRecord {
     Command(f64, JointCommand, Verdict),
     Distance(f64, Option<f64>),
     Event(f64, TrialEvent),
+    /// The cycle record and the cycle's executed jerk, max over the joints of |j| [rad/s³].
+    Cycle(f64, CycleRecord, Option<f64>),
 }
 
 /// What the report plots of one adaptation [-] and [s].
@@ -206,6 +214,20 @@ pub(crate) struct IndicatorRecord {
     pub(crate) dominant: Option<assess::Indicator>,
 }
 
+/// What the report plots of the control cycles, one sample per 10 ms of trial time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct CycleSample {
+    /// Time [s].
+    pub(crate) t_s: f64,
+    /// The planner's time scale [-].
+    pub(crate) time_scale: f64,
+    /// The planner's jerk limit [rad/s³].
+    pub(crate) jerk_limit_rad_s3: f64,
+    /// The largest executed |jerk| over the joints since the previous sample [rad/s³] (NaN
+    /// when none was measured).
+    pub(crate) jerk_abs_max_rad_s3: f64,
+}
+
 /// Everything kept in memory for the summary and the report (camera-rate and decimated data).
 #[derive(Debug, Default)]
 pub(crate) struct Recorded {
@@ -221,6 +243,8 @@ pub(crate) struct Recorded {
     pub(crate) distance: Vec<(f64, Option<f64>)>,
     /// Every event.
     pub(crate) events: Vec<(f64, TrialEvent)>,
+    /// Per 10 ms of cycle records.
+    pub(crate) cycles: Vec<CycleSample>,
 }
 
 /// Decimates a sampled stream to one sample per period.
@@ -266,6 +290,10 @@ pub(crate) struct TrialLog {
     ring: Vec<HotRecord>,
     state_decimator: Decimator,
     distance_decimator: Decimator,
+    cycle_decimator: Decimator,
+    /// Largest executed |jerk| since the last [`CycleSample`] (drain side) [rad/s³].
+    cycle_jerk_envelope: f64,
+    motion: MotionMetrics,
     buf: Vec<u8>,
     row: [f64; 44],
     next_chunk_t: f64,
@@ -318,9 +346,9 @@ impl TrialLog {
         }
         let open = |name: &str| {
             let p = dir.join(name);
-            File::create_new(&p).map(BufWriter::new).with_context(|| {
-                format!("cannot create {} (another trial's log?)", p.display())
-            })
+            File::create_new(&p)
+                .map(BufWriter::new)
+                .with_context(|| format!("cannot create {} (another trial's log?)", p.display()))
         };
         let write_options = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
@@ -356,6 +384,9 @@ impl TrialLog {
             robot,
             state_decimator: Decimator::new(DECIMATED_PERIOD_S),
             distance_decimator: Decimator::new(DECIMATED_PERIOD_S),
+            cycle_decimator: Decimator::new(DECIMATED_PERIOD_S),
+            cycle_jerk_envelope: f64::NAN,
+            motion: MotionMetrics::new(),
             buf: Vec::with_capacity(4096),
             row: [0.0; 44],
             next_chunk_t: 0.0,
@@ -454,6 +485,23 @@ impl TrialLog {
                     self.write(c, t, &buf)?;
                     self.recorded.events.push((t, *e));
                 }
+                HotRecord::Cycle(t, ref r, jerk) => {
+                    mcap_out::cycle_json(&mut buf, t, r, jerk);
+                    self.write(ch::CYCLE, t, &buf)?;
+                    if let Some(j) = jerk {
+                        self.cycle_jerk_envelope = self.cycle_jerk_envelope.max(j);
+                    }
+                    if self.cycle_decimator.keep(t) {
+                        self.recorded.cycles.push(CycleSample {
+                            t_s: t,
+                            time_scale: r.time_scale,
+                            jerk_limit_rad_s3: r.jerk_limit_rad_s3,
+                            jerk_abs_max_rad_s3: self.cycle_jerk_envelope,
+                        });
+                        self.cycle_jerk_envelope = f64::NAN;
+                    }
+                    self.maybe_close_chunk(t)?;
+                }
             }
             Ok(())
         })();
@@ -518,9 +566,10 @@ impl TrialLog {
     }
 
     /// Logs a robot state (control rate; decimated to 100 Hz unless
-    /// [`LogOptions::robot_full_rate`]). Copies into the ring: no allocation, no I/O (unless
-    /// the ring is full).
+    /// [`LogOptions::robot_full_rate`]; every state goes to the motion metrics). Copies into
+    /// the ring: no allocation, no I/O (unless the ring is full).
     pub(crate) fn robot_state(&mut self, t_s: f64, state: &RobotState) -> anyhow::Result<()> {
+        self.motion.on_state(t_s, state);
         if self.options.robot_full_rate || self.state_decimator.keep(t_s) {
             self.push(HotRecord::State(t_s, *state))?;
         }
@@ -535,7 +584,17 @@ impl TrialLog {
         cmd: &JointCommand,
         verdict: &Verdict,
     ) -> anyhow::Result<()> {
+        self.motion.on_verdict(t_s, verdict);
         self.push(HotRecord::Command(t_s, *cmd, *verdict))
+    }
+
+    /// Logs what the control cycle at `t_s` [s] reports about itself (control rate; every
+    /// cycle, `/robot/cycle`, after [`TrialLog::robot_state`] of the same cycle so the record
+    /// carries its executed jerk). Copies into the ring.
+    pub(crate) fn cycle(&mut self, t_s: f64, rec: &CycleRecord) -> anyhow::Result<()> {
+        self.motion.on_cycle(t_s, rec);
+        let jerk = self.motion.jerk_abs_max(t_s);
+        self.push(HotRecord::Cycle(t_s, *rec, jerk))
     }
 
     /// Logs the minimum distance between a tracked human point and the arm [m] (`None` when no
@@ -545,6 +604,7 @@ impl TrialLog {
         t_s: f64,
         min_distance_m: Option<f64>,
     ) -> anyhow::Result<()> {
+        self.motion.on_distance(t_s, min_distance_m);
         if self.options.robot_full_rate || self.distance_decimator.keep(t_s) {
             self.push(HotRecord::Distance(t_s, min_distance_m))?;
         }
@@ -560,6 +620,7 @@ impl TrialLog {
     /// Drains the ring, closes every file, writes `summary.json` and the report.
     pub(crate) fn finish(mut self) -> anyhow::Result<TrialFiles> {
         self.drain()?;
+        self.motion.finish();
         let mcap_summary = self.mcap.finish().context("cannot finish trial.mcap")?;
         let mut message_counts = BTreeMap::new();
         if let Some(stats) = &mcap_summary.stats {
@@ -578,6 +639,7 @@ impl TrialLog {
             mut robot,
             recorded,
             synchronous_drains,
+            motion,
             ..
         } = self;
         use std::io::Write;
@@ -589,7 +651,7 @@ impl TrialLog {
         robot.flush()?;
         robot.into_inner().flush()?;
 
-        let summary = summary::compute(&meta, &recorded.frames, &recorded.events);
+        let summary = summary::compute(&meta, &recorded.frames, &recorded.events, &motion);
         let summary_json = dir.join(SUMMARY_FILE);
         std::fs::write(&summary_json, summary::to_json(&summary)?)
             .with_context(|| format!("cannot write {}", summary_json.display()))?;

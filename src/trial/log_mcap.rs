@@ -48,6 +48,8 @@ pub(crate) mod ch {
     pub(crate) const TASK: usize = 7;
     /// `/safety/separation`.
     pub(crate) const SEPARATION: usize = 8;
+    /// `/robot/cycle`.
+    pub(crate) const CYCLE: usize = 9;
 }
 
 macro_rules! schema {
@@ -63,7 +65,7 @@ macro_rules! schema {
 }
 
 /// Every channel, in the order of [`ch`].
-pub(crate) const CHANNELS: [ChannelSpec; 9] = [
+pub(crate) const CHANNELS: [ChannelSpec; 10] = [
     ChannelSpec {
         topic: "/trial/meta",
         schema_name: "hrc_adapt.TrialMeta",
@@ -134,6 +136,14 @@ pub(crate) const CHANNELS: [ChannelSpec; 9] = [
         schema: schema!(
             "Minimum human-robot distance (m); null when no human point is tracked",
             r#"{"t_s":{"type":"number"},"min_distance_m":{"type":["number","null"]}}"#
+        ),
+    },
+    ChannelSpec {
+        topic: "/robot/cycle",
+        schema_name: "hrc_adapt.Cycle",
+        schema: schema!(
+            "Control cycle: missed cycles, latency and wake jitter (s; null on the mock clock), planner jerk limit (rad/s^3), time scale (0..1), executed jerk max over joints (rad/s^3)",
+            r#"{"t_s":{"type":"number"},"missed":{"type":"integer"},"latency_s":{"type":["number","null"]},"wake_jitter_s":{"type":["number","null"]},"jerk_limit_rad_s3":{"type":["number","null"]},"time_scale":{"type":["number","null"]},"jerk_abs_max_rad_s3":{"type":["number","null"]}}"#
         ),
     },
 ];
@@ -222,6 +232,29 @@ fn opt_arr(out: &mut Vec<u8>, k: &str, xs: Option<&[f64]>) {
         Some(xs) => arr(out, xs),
         None => out.extend_from_slice(b"null"),
     }
+}
+
+/// `/robot/cycle` message: the cycle record and the cycle's executed jerk (max over the joints
+/// of |j|, `null` before the third state).
+pub(crate) fn cycle_json(
+    out: &mut Vec<u8>,
+    t_s: f64,
+    r: &super::CycleRecord,
+    jerk_abs_max_rad_s3: Option<f64>,
+) {
+    out.clear();
+    out.extend_from_slice(b"{\"t_s\":");
+    num(out, t_s);
+    key(out, "missed");
+    let _ = write!(out, "{}", r.missed);
+    opt_num(out, "latency_s", r.latency_s);
+    opt_num(out, "wake_jitter_s", r.wake_jitter_s);
+    key(out, "jerk_limit_rad_s3");
+    num(out, r.jerk_limit_rad_s3);
+    key(out, "time_scale");
+    num(out, r.time_scale);
+    opt_num(out, "jerk_abs_max_rad_s3", jerk_abs_max_rad_s3);
+    out.push(b'}');
 }
 
 /// The name of a verdict: `passed`, `reduced`, `stopped`, `halted`.
@@ -483,5 +516,19 @@ mod tests {
         assert_eq!(event_json(&mut buf, 2.0, &e), ch::SAFETY);
         let v: serde_json::Value = serde_json::from_slice(&buf).unwrap();
         assert_eq!(v["requirement"], "SAF-REQ-005");
+        let r = super::super::CycleRecord {
+            missed: 2,
+            latency_s: None,
+            wake_jitter_s: Some(1.5e-5),
+            jerk_limit_rad_s3: 31.4,
+            time_scale: 0.5,
+        };
+        cycle_json(&mut buf, 3.0, &r, Some(12.0));
+        let v: serde_json::Value = serde_json::from_slice(&buf).unwrap();
+        assert_eq!(v["missed"], 2);
+        assert!(v["latency_s"].is_null());
+        assert_eq!(v["wake_jitter_s"], 1.5e-5);
+        assert_eq!(v["time_scale"], 0.5);
+        assert_eq!(v["jerk_abs_max_rad_s3"], 12.0);
     }
 }

@@ -23,6 +23,10 @@
 //! - `adaptation_changes`: `AdaptationChanged` events, in total and by the new rule's indicator.
 //! - `safety_events`: `Safety` events (debounced verdict changes, see the `log` module docs),
 //!   in total, by reaction and by requirement.
+//! - `motion`: motion quality from the raw per-cycle records (`motion_metrics.rs`, and
+//!   README.md, "Motion quality metrics"): supervisor interventions per requirement, raw per
+//!   command and as the debounced events above; stop windows; executed jerk and its limit;
+//!   velocity reversals; stop-and-go events; missed cycles, latency and wake jitter.
 //!
 //! # Formatting
 //! Keys come in the order of the structs below (maps in sorted order); every real number is
@@ -34,6 +38,7 @@ use assess::Indicator;
 use serde::Serialize;
 
 use super::TrialMeta;
+use super::motion::{MotionMetrics, MotionSummary, requirement_index};
 use crate::trial::events::TrialEvent;
 
 /// What the summary needs of one assessed frame.
@@ -188,6 +193,8 @@ pub(crate) struct Summary {
     pub(crate) safety_events: SafetyEvents,
     /// Assessed frames the summary was computed from.
     pub(crate) assessed_frames: u64,
+    /// Motion quality (from the raw per-cycle records).
+    pub(crate) motion: MotionSummary,
 }
 
 /// Rounds to 6 decimals; −0 becomes 0 and non-finite values stay as they are (JSON `null`).
@@ -217,11 +224,13 @@ fn overlap(a: &[(f64, f64)], b: &[(f64, f64)]) -> f64 {
     sum
 }
 
-/// Computes the summary (see the module docs for the definitions).
+/// Computes the summary (see the module docs for the definitions) from the assessed frames,
+/// the events and the finished motion metrics.
 pub(crate) fn compute(
     meta: &TrialMeta,
     frames: &[FrameRecord],
     events: &[(f64, TrialEvent)],
+    motion: &MotionMetrics,
 ) -> Summary {
     let finished = events.iter().find_map(|&(t, e)| match e {
         TrialEvent::Finished { reason } => Some((t, reason)),
@@ -260,6 +269,7 @@ pub(crate) fn compute(
         by_reaction: BTreeMap::new(),
         by_requirement: BTreeMap::new(),
     };
+    let mut debounced = [0u64; safety::Requirement::COUNT];
     let close_presentation = |h: &mut Open, t: f64| {
         if let Some(p) = h.presented.take() {
             *h.robot_wait.get_or_insert(0.0) += t - p;
@@ -323,6 +333,9 @@ pub(crate) fn compute(
                 safety.total += 1;
                 *safety.by_reaction.entry(reaction.into()).or_default() += 1;
                 *safety.by_requirement.entry(requirement.into()).or_default() += 1;
+                if let Some(c) = requirement_index(requirement).and_then(|i| debounced.get_mut(i)) {
+                    *c += 1;
+                }
             }
             TrialEvent::Finished { .. } | TrialEvent::Link { .. } => {}
         }
@@ -426,6 +439,7 @@ pub(crate) fn compute(
         adaptation_changes: adaptation,
         safety_events: safety,
         assessed_frames: frames.len() as u64,
+        motion: motion.summary(&debounced),
     }
 }
 
@@ -560,8 +574,18 @@ mod tests {
                 },
             ), // after the end
         ];
-        let s = compute(&meta(), &frames, &events);
-        let got: serde_json::Value = serde_json::from_str(&to_json(&s).unwrap()).unwrap();
+        let mut motion = MotionMetrics::new();
+        motion.finish();
+        let s = compute(&meta(), &frames, &events, &motion);
+        let mut got: serde_json::Value = serde_json::from_str(&to_json(&s).unwrap()).unwrap();
+        // The debounced events reach `motion` per requirement (SAF-REQ-011's comes after the
+        // end); the rest of `motion` has its own tests (motion_metrics.rs).
+        let m = got.as_object_mut().unwrap().remove("motion").unwrap();
+        let by = &m["interventions"]["by_requirement"];
+        assert_eq!(by["SAF-REQ-007"]["debounced_events"], 2);
+        assert_eq!(by["SAF-REQ-005"]["debounced_events"], 1);
+        assert_eq!(by["SAF-REQ-011"]["debounced_events"], 0);
+        assert_eq!(m["interventions"]["total"]["debounced_events"], 3);
         let want = serde_json::json!({
             "meta": {
                 "participant": "P01", "condition": "L2", "policy": "adaptive", "seed": 7,
@@ -599,12 +623,15 @@ mod tests {
             &meta(),
             &[frame(1.0 / 3.0, false, false, -1e-9, 0.0, None)],
             &[],
+            &MotionMetrics::new(),
         );
         let text = to_json(&s).unwrap();
         // Struct order, not alphabetical; 6 decimals; −0 as 0.
         let meta_at = text.find("\"meta\"").unwrap();
         let completion_at = text.find("\"completion_time_s\"").unwrap();
         assert!(meta_at < completion_at);
+        // `motion` comes last, after every key the summary had before it.
+        assert!(text.find("\"assessed_frames\"").unwrap() < text.find("\"motion\"").unwrap());
         assert!(text.contains("\"completion_time_s\": 0.333333,"), "{text}");
         assert!(text.contains("\"cumulative\": 0.0"), "{text}");
         assert!(text.contains("\"assessed\": null"), "{text}");

@@ -122,6 +122,16 @@ fn synthetic(
             Verdict::Passed
         };
         log.command(t, &cmd, &verdict)?;
+        log.cycle(
+            t,
+            &CycleRecord {
+                missed: u32::from(k % 1000 == 999),
+                latency_s: None,
+                wake_jitter_s: None,
+                jerk_limit_rad_s3: 31.4,
+                time_scale: 1.0,
+            },
+        )?;
         let d = (k % 1000 > 100).then_some(0.6 + 0.3 * s);
         log.human_distance(t, d)?;
         if k % 15 == 0 {
@@ -201,6 +211,7 @@ fn round_trip_through_mcap_with_every_channel_and_decimated_robot_state() {
         ("/safety/events", w.safety),
         ("/task/events", task_events),
         ("/safety/separation", 600),
+        ("/robot/cycle", w.ticks),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))

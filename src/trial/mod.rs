@@ -61,8 +61,9 @@ pub(crate) struct TrialArgs {
     #[arg(long, default_value = "emulator")]
     robot: String,
     /// `--robot emulator`: controller cycles the emulator runs per 2 ms of wall time
-    /// (default 4; a live camera needs 1, its default then).
-    #[arg(long)]
+    /// (default 4; a live camera needs 1, its default then), 1..=100: each 2 ms tick runs
+    /// that many cycles, and the trial loop already skips most samples far below 100.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=i64::from(robot_io::emulator::MAX_SPEEDUP)))]
     speedup: Option<u32>,
     /// Replay this recorded cue CSV (the `assess::io::cue_csv` format) instead of the simulated
     /// operator: sample-and-hold by time; the trial ends when the file ends ("cues_ended") or
@@ -435,7 +436,10 @@ mod tests {
         std::fs::create_dir(&dir).unwrap();
         std::fs::write(dir.join("trial.mcap"), "another trial's log").unwrap();
         let e = format!("{:#}", run_simulated(&spec, &dir, false).unwrap_err());
-        assert!(e.contains("trial.mcap") && e.contains("another trial"), "{e}");
+        assert!(
+            e.contains("trial.mcap") && e.contains("another trial"),
+            "{e}"
+        );
         assert_eq!(
             std::fs::read_to_string(dir.join("trial.mcap")).unwrap(),
             "another trial's log"
@@ -506,7 +510,11 @@ mod tests {
             a.timing.start_delay_s = s;
             a.timing.min_approach_duration_s = s;
             let m = runtime::motion_adaptation(&a);
-            assert_eq!((m.start_delay, m.min_approach_duration), (want, want), "{s}");
+            assert_eq!(
+                (m.start_delay, m.min_approach_duration),
+                (want, want),
+                "{s}"
+            );
         }
     }
 

@@ -10,7 +10,14 @@
 //!   approach duration;
 //! - `report_robot.png`: TCP speed and the minimum human distance;
 //! - `report_handovers.png`: the handover timeline: task phases as bars, operator idle and
-//!   (simulated) hesitation as bars, Presented/Grasped/returned markers per handover.
+//!   (simulated) hesitation as bars, Presented/Grasped/returned markers per handover;
+//! - `report_motion.png`: motion quality: TCP speed with the stop windows shaded (separation
+//!   windows in vermilion, others in grey) and the stop-and-go events outside stops marked;
+//!   the executed jerk (largest |j| over the joints per 10 ms, log scale) against 1.1 × the
+//!   planner's jerk limit; the planner's time scale.
+//!
+//! The page's "Motion quality" section tabulates `summary.json`'s `motion` object (README.md,
+//! "Motion quality metrics").
 //!
 //! A simulated trial is labelled SIMULATED in the page title, a banner, and every plot caption.
 
@@ -51,6 +58,10 @@ pub(crate) const ADAPTATION_PNG: &str = "report_adaptation.png";
 pub(crate) const ROBOT_PNG: &str = "report_robot.png";
 /// The handover timeline.
 pub(crate) const HANDOVERS_PNG: &str = "report_handovers.png";
+/// The motion-quality plot.
+pub(crate) const MOTION_PNG: &str = "report_motion.png";
+/// At most this many stop windows are tabulated in the page (all are in `summary.json`).
+const WINDOW_ROWS: usize = 100;
 
 const PX: (u32, u32) = (1400, 560);
 
@@ -436,6 +447,160 @@ fn plot_robot(
     root.present().map_err(err)
 }
 
+/// Motion quality: TCP speed with stop windows and stop-and-go events, executed jerk against
+/// the limit, time scale.
+fn plot_motion(
+    path: &Path,
+    meta: &TrialMeta,
+    rec: &Recorded,
+    summary: &Summary,
+    x: &std::ops::Range<f64>,
+) -> anyhow::Result<()> {
+    let m = &summary.motion;
+    let root = BitMapBackend::new(path, (PX.0, 1000)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let (top, rest) = root.split_vertically(400);
+    let (middle, bottom) = rest.split_vertically(370);
+    let v_max = rec
+        .tcp_speed
+        .iter()
+        .map(|p| p.1)
+        .filter(|v| v.is_finite())
+        .fold(0.1_f64, f64::max)
+        * 1.15;
+    {
+        let mut c = chart(
+            &top,
+            &format!(
+                "{}TCP speed, stop windows ({} separation, {} other) and {} stop-and-go events outside stops",
+                sim_tag(meta),
+                m.stop_windows.separation,
+                m.stop_windows.other,
+                m.stop_and_go.outside_stops
+            ),
+            x.clone(),
+            0.0..v_max,
+            "speed [m/s]",
+            8,
+        )
+        .map_err(err)?;
+        for (separation, colour, label) in [
+            (true, VERMILION, "stop window: SAF-REQ-007 (separation)"),
+            (false, GREY, "stop window: other requirement"),
+        ] {
+            let spans: Vec<(f64, f64)> = m
+                .stop_windows
+                .windows
+                .iter()
+                .filter(|w| w.separation == separation)
+                .map(|w| (w.start_s, w.start_s + w.duration_s.max(0.004)))
+                .collect();
+            let any = !spans.is_empty();
+            let series = c
+                .draw_series(spans.into_iter().map(|(a, b)| {
+                    Rectangle::new([(a, 0.0), (b, v_max)], colour.mix(0.22).filled())
+                }))
+                .map_err(err)?;
+            if any {
+                series.label(label).legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 7), (x + 24, y + 7)], colour.mix(0.35).filled())
+                });
+            }
+        }
+        draw_series(&mut c, rec.tcp_speed.clone(), BLUE, 2, "TCP speed |v|").map_err(err)?;
+        let events = &m.stop_and_go.events_outside_stops;
+        if !events.is_empty() {
+            c.draw_series(
+                events.iter().map(|e| {
+                    TriangleMarker::new((e.start_s, 0.5 * e.peak_m_s), 8, ORANGE.filled())
+                }),
+            )
+            .map_err(err)?
+            .label("stop-and-go event outside stops (at half the recent peak)")
+            .legend(|(x, y)| TriangleMarker::new((x + 12, y), 8, ORANGE.filled()));
+        }
+        legend(&mut c, SeriesLabelPosition::UpperRight).map_err(err)?;
+    }
+    {
+        // Jerk on a log scale from 0.1 rad/s³ (smaller values are drawn at 0.1).
+        let floor = 0.1;
+        let j_max = rec
+            .cycles
+            .iter()
+            .flat_map(|c| [c.jerk_abs_max_rad_s3, 1.1 * c.jerk_limit_rad_s3])
+            .filter(|v| v.is_finite())
+            .fold(10.0_f64, f64::max)
+            * 2.0;
+        let mut c = ChartBuilder::on(&middle)
+            .caption(
+                format!(
+                    "Executed jerk (max over joints per 10 ms): {} of {} samples over 1.1 × limit outside stops",
+                    m.jerk_limit.outside_stops.exceeding, m.jerk_limit.outside_stops.judged
+                ),
+                font(22),
+            )
+            .margin_top(8)
+            .margin_left(14)
+            .margin_right(24)
+            .margin_bottom(6)
+            .x_label_area_size(46)
+            .y_label_area_size(80)
+            .build_cartesian_2d(x.clone(), (floor..j_max).log_scale())
+            .map_err(err)?;
+        c.configure_mesh()
+            .x_desc("trial time t [s]")
+            .y_desc("|jerk| [rad/s³]")
+            .axis_desc_style(font(18))
+            .label_style(font(15))
+            .x_labels(12)
+            .y_labels(6)
+            .light_line_style(TRANSPARENT)
+            .bold_line_style(BLACK.mix(0.08))
+            .draw()
+            .map_err(err)?;
+        let jerk: Vec<(f64, f64)> = rec
+            .cycles
+            .iter()
+            .filter(|c| c.jerk_abs_max_rad_s3.is_finite())
+            .map(|c| (c.t_s, c.jerk_abs_max_rad_s3.max(floor)))
+            .collect();
+        c.draw_series(LineSeries::new(jerk, style(BLUE, 1)))
+            .map_err(err)?
+            .label("executed |jerk|")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style(BLUE, 3)));
+        let limit: Vec<(f64, f64)> = rec
+            .cycles
+            .iter()
+            .filter(|c| c.jerk_limit_rad_s3.is_finite() && c.jerk_limit_rad_s3 > 0.0)
+            .map(|c| (c.t_s, (1.1 * c.jerk_limit_rad_s3).max(floor)))
+            .collect();
+        c.draw_series(LineSeries::new(limit, style(VERMILION, 2)))
+            .map_err(err)?
+            .label("1.1 × planner jerk limit")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style(VERMILION, 3)));
+        c.configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font(font(15))
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK.mix(0.35))
+            .draw()
+            .map_err(err)?;
+    }
+    let mut c = chart(
+        &bottom,
+        "Planner time scale",
+        x.clone(),
+        0.0..1.1,
+        "time scale [-]",
+        8,
+    )
+    .map_err(err)?;
+    let scale: Vec<(f64, f64)> = rec.cycles.iter().map(|c| (c.t_s, c.time_scale)).collect();
+    draw_series(&mut c, scale, GREEN, 2, "time scale s").map_err(err)?;
+    legend(&mut c, SeriesLabelPosition::LowerRight).map_err(err)?;
+    root.present().map_err(err)
+}
+
 /// Colour of a task phase bar.
 fn phase_colour(p: &str) -> RGBColor {
     match p {
@@ -777,6 +942,10 @@ pub(crate) fn write(
         figures.push((title.into(), p.clone()));
         plots.push(p);
     }
+    let p = dir.join(MOTION_PNG);
+    plot_motion(&p, meta, rec, summary, &x)?;
+    figures.push(("Motion quality".into(), p.clone()));
+    plots.push(p);
 
     let html = page(meta, summary, &figures)?;
     let path = dir.join(HTML_FILE);
@@ -908,6 +1077,7 @@ th{{background:#f3f3f3}}img{{max-width:100%;border:1px solid #eee}}\
         );
     }
     h.push_str("</table>\n");
+    motion_section(&mut h, s);
     for (title, path) in figures {
         let bytes =
             std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
@@ -928,6 +1098,223 @@ th{{background:#f3f3f3}}img{{max-width:100%;border:1px solid #eee}}\
     }
     h.push_str("<p>Files: <a href=\"trial.mcap\">trial.mcap</a> (open in Foxglove), <a href=\"indicators.csv\">indicators.csv</a>, <a href=\"robot.csv\">robot.csv</a>, <a href=\"summary.json\">summary.json</a>.</p>\n</body></html>\n");
     Ok(h)
+}
+
+fn count_opt(x: Option<f64>, unit: &str) -> String {
+    x.map_or_else(|| "–".into(), |v| format!("{v:.3} {unit}"))
+}
+
+/// The "Motion quality" section: `summary.json`'s `motion` as tables.
+fn motion_section(h: &mut String, s: &Summary) {
+    let m = &s.motion;
+    let _ = writeln!(
+        h,
+        "<h2>Motion quality</h2>\n<p>From every 500 Hz state, verdict and cycle record (not the \
+         decimated or debounced streams); definitions in README.md, \"Motion quality metrics\". \
+         A stop window runs from the first Stopped/Halted verdict to {:.1} s after the last one \
+         of its run; \"outside stops\" leaves those windows out. SAF-REQ-007 windows are the \
+         real separation stops.</p>",
+        m.stop_windows.tail_s
+    );
+    let _ = writeln!(
+        h,
+        "<table><tr><th>metric</th><th>overall</th><th>outside stops</th></tr>"
+    );
+    let j = &m.jerk;
+    let jl = &m.jerk_limit;
+    let rev = &m.velocity_reversals;
+    let exceed = |e: &super::log::motion::ExceedSummary| {
+        format!(
+            "{} of {} ({})",
+            e.exceeding,
+            e.judged,
+            e.share
+                .map_or_else(|| "–".into(), |x| format!("{:.2} %", 100.0 * x))
+        )
+    };
+    let rows: Vec<(String, String, String)> = vec![
+        (
+            "executed jerk RMS (all joints)".into(),
+            count_opt(j.overall.rms_rad_s3, "rad/s³"),
+            count_opt(j.outside_stops.rms_rad_s3, "rad/s³"),
+        ),
+        (
+            "executed jerk max".into(),
+            count_opt(j.overall.max_rad_s3, "rad/s³"),
+            count_opt(j.outside_stops.max_rad_s3, "rad/s³"),
+        ),
+        (
+            "jerk RMS per joint [rad/s³]".into(),
+            fmt_joints(j.overall.rms_per_joint_rad_s3),
+            fmt_joints(j.outside_stops.rms_per_joint_rad_s3),
+        ),
+        (
+            "jerk max per joint [rad/s³]".into(),
+            fmt_joints(j.overall.max_per_joint_rad_s3),
+            fmt_joints(j.outside_stops.max_per_joint_rad_s3),
+        ),
+        (
+            format!(
+                "samples with |jerk| > {:.1} × planner limit ({} – {} rad/s³)",
+                jl.factor,
+                jl.min_rad_s3
+                    .map_or_else(|| "–".into(), |x| format!("{x:.3}")),
+                jl.max_rad_s3
+                    .map_or_else(|| "–".into(), |x| format!("{x:.3}"))
+            ),
+            exceed(&jl.overall),
+            exceed(&jl.outside_stops),
+        ),
+        (
+            format!(
+                "velocity reversals (|q̇| > {} rad/s both sides within {} s), per joint",
+                rev.min_speed_rad_s, rev.window_s
+            ),
+            format!("{} {:?}", rev.overall.total, rev.overall.per_joint),
+            format!(
+                "{} {:?}",
+                rev.outside_stops.total, rev.outside_stops.per_joint
+            ),
+        ),
+        (
+            format!(
+                "stop-and-go events (below ½ of the {} s peak, back within {} s)",
+                m.stop_and_go.peak_window_s, m.stop_and_go.recovery_s
+            ),
+            m.stop_and_go.overall.to_string(),
+            m.stop_and_go.outside_stops.to_string(),
+        ),
+    ];
+    for (k, a, b) in rows {
+        let _ = writeln!(
+            h,
+            "<tr><th>{}</th><td>{}</td><td>{}</td></tr>",
+            esc(&k),
+            esc(&a),
+            esc(&b)
+        );
+    }
+    h.push_str("</table>\n");
+
+    let c = &m.cycles;
+    let pct = |p: &Option<super::log::motion::Percentiles>| {
+        p.as_ref().map_or_else(
+            || "– (mock clock)".into(),
+            |p| format!("{:.1} / {:.1} / {:.1} µs", p.p50, p.p99, p.max),
+        )
+    };
+    let _ = writeln!(h, "<table>");
+    for (k, v) in [
+        (
+            "control cycles (commands judged)",
+            m.control_cycles.to_string(),
+        ),
+        (
+            "states (repeated, skipped)",
+            format!("{} ({})", m.state_samples, m.repeated_states),
+        ),
+        (
+            "missed controller cycles (cycles after a gap, most in one gap)",
+            format!(
+                "{} ({}, {})",
+                c.missed_total, c.cycles_with_missed, c.missed_max
+            ),
+        ),
+        ("cycle latency p50 / p99 / max", pct(&c.latency_us)),
+        ("wake jitter p50 / p99 / max", pct(&c.wake_jitter_us)),
+        (
+            "planner time scale min / mean",
+            format!(
+                "{} / {}",
+                opt(c.time_scale_min, ""),
+                opt(c.time_scale_mean, "")
+            ),
+        ),
+        (
+            "stop windows (separation / other), time inside",
+            format!(
+                "{} ({} / {}), {:.3} s",
+                m.stop_windows.count,
+                m.stop_windows.separation,
+                m.stop_windows.other,
+                m.stop_windows.time_s
+            ),
+        ),
+    ] {
+        let _ = writeln!(h, "<tr><th>{}</th><td>{}</td></tr>", esc(k), esc(&v));
+    }
+    h.push_str("</table>\n");
+
+    let i = &m.interventions;
+    let _ = writeln!(
+        h,
+        "<h3>Supervisor interventions</h3>\n<p>Raw: one count per command judged ({} commands, {} \
+         passed). Debounced: the safety events (a pair held for 50 ms).</p>\n<table><tr><th>requirement</th>\
+         <th>reduced</th><th>stopped</th><th>halted</th><th>debounced events</th></tr>",
+        i.commands, i.passed
+    );
+    let total = String::from("total");
+    for (id, n) in i
+        .by_requirement
+        .iter()
+        .chain(std::iter::once((&total, &i.total)))
+    {
+        let _ = writeln!(
+            h,
+            "<tr><th>{}</th><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            esc(id),
+            n.reduced,
+            n.stopped,
+            n.halted,
+            n.debounced_events
+        );
+    }
+    h.push_str("</table>\n");
+
+    let w = &m.stop_windows;
+    let _ = writeln!(
+        h,
+        "<h3>Stop windows</h3>\n<p>{} windows, {} with a SAF-REQ-007 stop (a real separation stop: \
+         a tracked human point closer than the protective separation distance).{}</p>",
+        w.count,
+        w.separation,
+        if w.windows.len() > WINDOW_ROWS {
+            format!(" The first {WINDOW_ROWS} are shown; all are in summary.json.")
+        } else {
+            String::new()
+        }
+    );
+    if !w.windows.is_empty() {
+        h.push_str(
+            "<table><tr><th>start [s]</th><th>duration [s]</th><th>stop cycles</th>\
+             <th>requirements</th><th>violation (body part, link)</th><th>min human distance [m]</th></tr>\n",
+        );
+        for win in w.windows.iter().take(WINDOW_ROWS) {
+            let _ = writeln!(
+                h,
+                "<tr><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                win.start_s,
+                win.duration_s,
+                win.stop_cycles,
+                esc(&win.requirements.join(", ")),
+                esc(&win.violation),
+                opt(win.min_human_distance_m, "")
+            );
+        }
+        h.push_str("</table>\n");
+    }
+}
+
+fn fmt_joints(x: Option<[f64; 6]>) -> String {
+    x.map_or_else(
+        || "–".into(),
+        |a| {
+            a.iter()
+                .map(|v| format!("{v:.2}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        },
+    )
 }
 
 #[cfg(test)]

@@ -30,7 +30,7 @@ use super::cues::{CueSource, RecordedCues};
 use super::events::TrialEvent;
 #[cfg(feature = "vision")]
 use super::live::LiveCues;
-use super::log::{LogOptions, TrialLog, TrialMeta};
+use super::log::{CycleRecord, LogOptions, TrialLog, TrialMeta};
 use super::operator::{Level, RobotView, SimulatedOperator};
 
 /// Control period [s] (UR5e).
@@ -1054,6 +1054,29 @@ fn drive<R: TrialRobot>(
                 log.robot_state(t, &state)?;
             }
             log.command(t, &cmd, &verdict)?;
+            let smooth = motion.smoothness_scale.get();
+            log.cycle(
+                t,
+                &CycleRecord {
+                    missed: match clock {
+                        Clock::Mock => 0,
+                        Clock::Controller => ((dt / CYCLE_S).round() as u32).saturating_sub(1),
+                    },
+                    // TODO(lead): wall-clock latency and wake jitter from the real-time runtime.
+                    latency_s: None,
+                    wake_jitter_s: None,
+                    jerk_limit_rad_s3: controller
+                        .config()
+                        .limits
+                        .max_jerk()
+                        .iter()
+                        .fold(0.0_f64, |m, j| m.max(*j))
+                        * smooth
+                        * smooth,
+                    // TODO(lead): the planner's time-scaling factor once the controller has one.
+                    time_scale: 1.0,
+                },
+            )?;
             log.human_distance(
                 t,
                 min_human_distance_m(&humans, controller.control_points()),
