@@ -43,8 +43,8 @@ pub(crate) struct ExperimentArgs {
     /// Folder under which `<timestamp>-experiment/` is created.
     #[arg(long, default_value = "runs")]
     out_root: PathBuf,
-    /// Trials run in parallel (default: the available cores).
-    #[arg(long)]
+    /// Trials run in parallel (default: the available cores), 1..=256 (one thread each).
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=256))]
     jobs: Option<usize>,
     /// Guide this participant's real session (their schedule rows, trial by trial, with
     /// prompts and NASA-TLX) instead of running the simulated experiment.
@@ -55,8 +55,9 @@ pub(crate) struct ExperimentArgs {
     #[arg(long, requires = "participant")]
     robot: Option<String>,
     /// Real session with `--robot emulator`: controller cycles per 2 ms of wall time
-    /// (default 4; a live camera needs 1, its default then).
-    #[arg(long, requires = "participant")]
+    /// (default 4; a live camera needs 1, its default then), 1..=100: each 2 ms tick runs
+    /// that many cycles, and the trial loop already skips most samples far below 100.
+    #[arg(long, requires = "participant", value_parser = crate::trial::speedup_parser())]
     speedup: Option<u32>,
     /// Real session: take each trial's cues from a live camera (`camera`: a RealSense with
     /// feature `realsense`, else the first webcam; or `webcam:N`) instead of the simulated

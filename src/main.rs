@@ -82,3 +82,36 @@ fn run() -> anyhow::Result<()> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn speedup_and_jobs_are_bounded_on_every_command_that_takes_them() {
+        // Issue 10: `--speedup 4294967295` was accepted and hung the emulator.
+        let parse = |args: &[&str]| {
+            Cli::try_parse_from(["hrc-adapt"].iter().chain(args))
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        };
+        let experiment = ["experiment", "--config", "x.toml", "--participant", "P01"];
+        for command in [&["trial"][..], &experiment[..], &["emulate", "--sim"][..]] {
+            for ok in ["1", "100"] {
+                let args = [command, &["--speedup", ok]].concat();
+                assert!(parse(&args).is_ok(), "{args:?}: {:?}", parse(&args));
+            }
+            for bad in ["0", "101", "4294967295"] {
+                let args = [command, &["--speedup", bad]].concat();
+                let e = parse(&args).unwrap_err();
+                assert!(e.contains("1..=100"), "{args:?}: {e}");
+            }
+        }
+        // --jobs starts one thread per job.
+        let jobs = |n: &str| parse(&["experiment", "--config", "x.toml", "--jobs", n]);
+        assert!(jobs("256").is_ok());
+        for bad in ["0", "257", "18446744073709551615"] {
+            assert!(jobs(bad).unwrap_err().contains("1..=256"), "--jobs {bad}");
+        }
+    }
+}

@@ -58,7 +58,8 @@ pub struct EmulatorConfig {
     pub realtime_port: u16,
     /// Controller version reported to RTDE clients.
     pub controller_version: ControllerVersion,
-    /// Virtual controller cycles run per 2 ms of wall time [-], ≥ 1 (1 = real time).
+    /// Virtual controller cycles run per 2 ms of wall time [-], in [1, [`MAX_SPEEDUP`]]
+    /// (1 = real time).
     pub speedup: u32,
     /// A client whose outgoing queue stays full this long is dropped (a controller drops a
     /// client that stops reading after about 10 s).
@@ -69,6 +70,12 @@ pub struct EmulatorConfig {
     /// registers 0–23 on some cells); clients asking for them get `IN_USE`.
     pub preclaimed_inputs: Vec<String>,
 }
+
+/// The largest [`EmulatorConfig::speedup`] [-]: 100. Each 2 ms tick runs `speedup` controller
+/// cycles while holding the emulator's state, so a tick at 100 is still a small fraction of
+/// the 2 ms, and a client reading every sample (500 × speedup per second) already skips most
+/// of them; a huge value kept the emulator busy for ever (issue 10: 4294967295 hung it).
+pub const MAX_SPEEDUP: u32 = 100;
 
 impl Default for EmulatorConfig {
     fn default() -> Self {
@@ -947,6 +954,15 @@ impl Emulator {
         if cfg.speedup == 0 || cfg.queue_packages == 0 {
             return Err(RobotIoError::InvalidConfig {
                 reason: "speedup and queue_packages must be at least 1".into(),
+            });
+        }
+        if cfg.speedup > MAX_SPEEDUP {
+            return Err(RobotIoError::InvalidConfig {
+                reason: format!(
+                    "speedup must be at most {MAX_SPEEDUP}, got {}: each 2 ms tick runs that \
+                     many controller cycles",
+                    cfg.speedup
+                ),
             });
         }
         let rtde = bind(cfg.bind, cfg.rtde_port, "rtde").await?;

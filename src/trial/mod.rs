@@ -63,7 +63,7 @@ pub(crate) struct TrialArgs {
     /// `--robot emulator`: controller cycles the emulator runs per 2 ms of wall time
     /// (default 4; a live camera needs 1, its default then), 1..=100: each 2 ms tick runs
     /// that many cycles, and the trial loop already skips most samples far below 100.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=i64::from(robot_io::emulator::MAX_SPEEDUP)))]
+    #[arg(long, value_parser = crate::trial::speedup_parser())]
     speedup: Option<u32>,
     /// Replay this recorded cue CSV (the `assess::io::cue_csv` format) instead of the simulated
     /// operator: sample-and-hold by time; the trial ends when the file ends ("cues_ended") or
@@ -184,6 +184,12 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
     }
     println!("{}", out.display());
     Ok(())
+}
+
+/// `--speedup`'s parser (`trial`, `experiment`, `emulate`): 1..=
+/// [`robot_io::emulator::MAX_SPEEDUP`], so a bad value is a usage error naming the range.
+pub(crate) fn speedup_parser() -> clap::builder::RangedI64ValueParser<u32> {
+    clap::value_parser!(u32).range(1..=i64::from(robot_io::emulator::MAX_SPEEDUP))
 }
 
 /// The robot from `--robot` and `--speedup`: `sim`, `emulator` or a UR5e's address. A live
