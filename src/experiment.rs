@@ -12,6 +12,8 @@
 //!    (error or panic) is recorded and the experiment goes on.
 //! 4. Reads the trial folders' `summary.json` ([`aggregate`]), computes the statistics and writes
 //!    `experiment_summary.json` and the self-contained `experiment_report.html` ([`report`]).
+//! 5. Exits non-zero when any trial failed, after everything above is written, naming how many
+//!    and where their errors and logs are.
 //!
 //! With `--participant P03 --robot <ip|emulator>` it instead guides one participant's real
 //! session, trial by trial, with start / pause / skip / quit prompts and the NASA-TLX ratings
@@ -320,6 +322,15 @@ pub(crate) fn run(args: ExperimentArgs) -> anyhow::Result<()> {
         out.trials, out.failed, out.wall_s
     );
     println!("{}", out.report.display());
+    // Everything that could be written is; a failed trial still fails the command.
+    anyhow::ensure!(
+        out.failed == 0,
+        "{} of {} trials failed (each error is in {}); the trial logs are in {}",
+        out.failed,
+        out.trials,
+        out.report.display(),
+        out.dir.display()
+    );
     Ok(())
 }
 
@@ -432,6 +443,18 @@ fn run_real_session(args: &ExperimentArgs, participant: &str) -> anyhow::Result<
         );
     }
     println!("{}", dir.display());
+    let failed = record
+        .steps
+        .iter()
+        .filter(|(_, o)| matches!(o, session::StepOutcome::Failed(_)))
+        .count();
+    anyhow::ensure!(
+        failed == 0,
+        "{failed} of {} trials of the session failed; their logs and everything entered are \
+         in {}",
+        trials.len(),
+        dir.display()
+    );
     Ok(())
 }
 

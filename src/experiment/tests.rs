@@ -127,6 +127,62 @@ fn a_failing_trial_is_reported_and_the_others_still_run() {
 }
 
 #[test]
+fn an_experiment_whose_trials_failed_exits_non_zero_after_writing_its_report() {
+    // At a077dd5 `experiment` exited 0 when every trial failed. Here every trial fails at
+    // once: the trial config names a workspace file that does not exist.
+    let tmp = tempfile::tempdir().unwrap();
+    let trial_cfg = short_trial_config(tmp.path(), 2.0);
+    let text = std::fs::read_to_string(&trial_cfg).unwrap();
+    let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/example-workspace.toml");
+    let text = text.replace(
+        &format!("{:?}", workspace.display().to_string()),
+        "\"missing-workspace.toml\"",
+    );
+    assert!(text.contains("missing-workspace.toml"));
+    std::fs::write(&trial_cfg, text).unwrap();
+    let cfg = tmp.path().join("ab.toml");
+    std::fs::write(
+        &cfg,
+        "participants = 1\nconditions = [\"L1\"]\npolicies = [\"adaptive\", \"fixed\"]\n\
+         seed = 1\ntrial_config = \"trial-short.toml\"\n",
+    )
+    .unwrap();
+    #[derive(clap::Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: ExperimentArgs,
+    }
+    let root = tmp.path().join("runs");
+    let args = <Cli as clap::Parser>::try_parse_from([
+        "experiment".as_ref(),
+        "--config".as_ref(),
+        cfg.as_os_str(),
+        "--out-root".as_ref(),
+        root.as_os_str(),
+        "--jobs".as_ref(),
+        "1".as_ref(),
+    ] as [&std::ffi::OsStr; 7])
+    .unwrap()
+    .args;
+    let e = format!("{:#}", run(args).unwrap_err());
+    assert!(e.contains("2 of 2 trials failed"), "{e}");
+    // Everything that could be written was, and the message says where.
+    let dirs: Vec<_> = std::fs::read_dir(&root).unwrap().collect();
+    assert_eq!(dirs.len(), 1);
+    let dir = dirs[0].as_ref().unwrap().path();
+    assert!(e.contains(&dir.display().to_string()), "{e}");
+    for f in [
+        "schedule.csv",
+        "experiment_summary.json",
+        "experiment_report.html",
+    ] {
+        assert!(dir.join(f).is_file(), "{f}");
+    }
+    let summary = std::fs::read_to_string(dir.join("experiment_summary.json")).unwrap();
+    assert!(summary.contains("missing-workspace.toml"), "{summary}");
+}
+
+#[test]
 fn shipped_experiment_config_is_the_acceptance_design() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/experiment-ab.toml");
     let cfg = ExperimentConfig::from_file(&path).unwrap();
