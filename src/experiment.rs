@@ -49,8 +49,9 @@ pub(crate) struct ExperimentArgs {
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=256))]
     jobs: Option<usize>,
     /// Guide this participant's real session (their schedule rows, trial by trial, with
-    /// prompts and NASA-TLX) instead of running the simulated experiment.
-    #[arg(long)]
+    /// prompts and NASA-TLX) instead of running the simulated experiment. An id of the
+    /// schedule (`P01`, …; [A-Za-z0-9_-]{1,32}, as it names the session folder).
+    #[arg(long, value_parser = crate::trial::participant_id)]
     participant: Option<String>,
     /// Real session: the robot, `emulator` (in-process controller emulator over loopback RTDE),
     /// `sim` (in-process, for a rehearsal) or a UR5e's address.

@@ -114,4 +114,27 @@ mod tests {
             assert!(jobs(bad).unwrap_err().contains("1..=256"), "--jobs {bad}");
         }
     }
+
+    #[test]
+    fn participant_ids_that_could_leave_the_run_folder_are_refused_before_anything_starts() {
+        // Issue 10: `--participant ../../x` was not checked (it names the run folder).
+        let parse = |args: &[&str]| {
+            Cli::try_parse_from(["hrc-adapt"].iter().chain(args))
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        };
+        let session = ["experiment", "--config", "x.toml", "--participant"];
+        for command in [&["trial", "--participant"][..], &session[..]] {
+            for ok in ["P01", "lab_3-b", &"x".repeat(32)] {
+                let args = [command, &[ok]].concat();
+                assert!(parse(&args).is_ok(), "{args:?}: {:?}", parse(&args));
+            }
+            let long = "x".repeat(33);
+            for bad in ["../../x", "a/b", "..", "", "P 01", "P01\n", "Ü1", &long] {
+                let args = [command, &[bad]].concat();
+                let e = parse(&args).unwrap_err();
+                assert!(e.contains("[A-Za-z0-9_-]{1,32}"), "{args:?}: {e}");
+            }
+        }
+    }
 }

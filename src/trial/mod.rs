@@ -41,8 +41,9 @@ pub(crate) use runtime::{TrialSpec, run_simulated};
 /// Arguments of `hrc-adapt trial`.
 #[derive(Debug, Args)]
 pub(crate) struct TrialArgs {
-    /// Participant id, used in the run folder name.
-    #[arg(long, default_value = "P00")]
+    /// Participant id, used in the run folder name: 1 to 32 letters, digits, `_` or `-`
+    /// ([A-Za-z0-9_-]{1,32}), so it cannot lead out of `--out-root`.
+    #[arg(long, default_value = "P00", value_parser = participant_id)]
     participant: String,
     /// Task complexity level: L1, L2 or L3.
     #[arg(long, default_value = "L2")]
@@ -184,6 +185,28 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
     }
     println!("{}", out.display());
     Ok(())
+}
+
+/// The pattern of a participant id, which names run folders: [`participant_id`].
+pub(crate) const PARTICIPANT_ID_PATTERN: &str = "[A-Za-z0-9_-]{1,32}";
+
+/// `--participant`'s parser (`trial`, `experiment`): an id that matches
+/// [`PARTICIPANT_ID_PATTERN`], 1 to 32 ASCII letters, digits, `_` or `-`. It goes into folder
+/// names, so `/`, `..`, spaces and anything else are refused before anything is created
+/// (issue 10: `--participant ../../x` was taken as given).
+pub(crate) fn participant_id(s: &str) -> Result<String, String> {
+    let ok = (1..=32).contains(&s.len())
+        && s
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-');
+    if ok {
+        Ok(s.to_owned())
+    } else {
+        Err(format!(
+            "a participant id must match {PARTICIPANT_ID_PATTERN} (1 to 32 letters, digits, \
+             `_` or `-`; it names the run folder), got {s:?}"
+        ))
+    }
 }
 
 /// `--speedup`'s parser (`trial`, `experiment`, `emulate`): 1..=
