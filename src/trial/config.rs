@@ -192,6 +192,50 @@ impl TrialConfig {
     }
 }
 
+/// Refuses a handover task whose home, pick or handover pose (joint space, after IK) puts the
+/// TCP, the wrist or the elbow outside the safety supervisor's workspace box `workspace`
+/// (SAF-REQ-006, [`safety::WorkspaceBox`]). Such a task could never be done: every command
+/// towards the pose would be stopped (issue 10: a pick pose below the table ran 600 s with
+/// 272,161 SAF-REQ-006 stops). The error names `file`, the pose, the point and where it is.
+/// The check is here, in the binary, so that `adapt` does not depend on `safety`.
+pub(crate) fn check_task_poses(
+    task: &adapt::task::TaskConfig,
+    workspace: &safety::WorkspaceBox,
+    file: &Path,
+) -> anyhow::Result<()> {
+    for (pose, q) in [
+        ("poses.home", &task.home_q_rad),
+        ("poses.pick", &task.pick_q_rad),
+        ("poses.handover", &task.handover_q_rad),
+    ] {
+        for (point, p) in safety::points::arm_points(q).as_array() {
+            let name = match point {
+                safety::points::ArmPoint::Tcp => "TCP",
+                safety::points::ArmPoint::Wrist => "wrist",
+                safety::points::ArmPoint::Elbow => "elbow",
+            };
+            let (lo, hi) = (workspace.min_m(), workspace.max_m());
+            anyhow::ensure!(
+                workspace.contains(&p),
+                "{}: `{pose}` puts the {name} at ({:.3}, {:.3}, {:.3}) m (base frame), outside \
+                 the safety supervisor's workspace box [{}, {}] × [{}, {}] × [{}, {}] m \
+                 (SAF-REQ-006): every motion to it would be stopped",
+                file.display(),
+                p[0],
+                p[1],
+                p[2],
+                lo[0],
+                hi[0],
+                lo[1],
+                hi[1],
+                lo[2],
+                hi[2]
+            );
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -239,5 +283,57 @@ mod tests {
             let e = format!("{:#}", with(key, bad).unwrap_err());
             assert!(e.contains(key) && e.contains(bound), "{key} = {bad}: {e}");
         }
+    }
+
+    /// The shipped controller file with the pick pose's flange height set to `z_m` [m].
+    fn controller_with_pick_z(dir: &Path, z_m: f64) -> PathBuf {
+        let shipped = TrialConfig::shipped().unwrap().controller;
+        let mut v: toml::Value =
+            toml::from_str(&std::fs::read_to_string(shipped).unwrap()).unwrap();
+        v["controller"]["task"]["poses"]["pick"]["position_m"][2] = toml::Value::Float(z_m);
+        let path = dir.join("handover.toml");
+        std::fs::write(&path, toml::to_string(&v).unwrap()).unwrap();
+        path
+    }
+
+    #[test]
+    fn saf_req_006_a_task_pose_outside_the_workspace_box_is_refused_at_load() {
+        // Issue 10: a pick pose below the table ran 600 s with 272,161 SAF-REQ-006 stops and
+        // exited 0. It is refused before the trial starts, naming the pose and the point.
+        let tmp = tempfile::tempdir().unwrap();
+        let mut spec = crate::trial::runtime::test_spec(crate::trial::operator::Level::L1, 1, 2.0);
+        spec.config.controller = controller_with_pick_z(tmp.path(), -0.05);
+        let out = tmp.path().join("run");
+        let e = format!(
+            "{:#}",
+            crate::trial::run_simulated(&spec, &out, false).unwrap_err()
+        );
+        assert!(
+            e.contains("poses.pick") && e.contains("TCP") && e.contains("workspace box"),
+            "{e}"
+        );
+        assert!(
+            !out.join("summary.json").exists(),
+            "the trial did not start"
+        );
+        assert!(e.contains("(-0.380, 0.350, -0.050) m"), "{e}");
+        // The shipped task and the example task are inside the box.
+        let box_ = safety::SupervisorConfig::ur5e().workspace;
+        let file = Path::new("handover.toml");
+        let mut task = adapt::task::TaskConfig::example();
+        assert!(check_task_poses(&task, &box_, file).is_ok());
+        // Upper arm horizontal (shoulder 0), forearm hanging down (elbow π/2): by UR5e DH
+        // (d1 = 0.1625 m, a3 = −0.3922 m) the wrist is at z = 0.1625 − 0.3922 = −0.23 m,
+        // below the box's 0.02 m floor; the elbow stays at 0.1625 m, inside.
+        task.handover_q_rad = [0.0, 0.0, std::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0];
+        let wrist = safety::points::arm_points(&task.handover_q_rad).wrist;
+        assert!((wrist[2] + 0.2297).abs() < 1e-3, "{wrist:?}");
+        let e = check_task_poses(&task, &box_, file)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("`poses.handover`") && e.contains("handover.toml"),
+            "{e}"
+        );
     }
 }

@@ -595,6 +595,11 @@ fn load_setup(
     )
     .with_context(|| format!("parsing {}", cfg.controller.display()))?;
     let ctl_cfg = ControllerConfig::try_from(&raw.controller)?;
+    super::config::check_task_poses(
+        &ctl_cfg.task,
+        &SupervisorConfig::ur5e().workspace,
+        &cfg.controller,
+    )?;
     let table = RuleTable::from_toml_file(&cfg.policy_table)?;
     Ok(Setup {
         workspace,
