@@ -155,6 +155,9 @@ pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
     let out = match out {
         Ok(out) => out,
         Err(e) => {
+            // A trial that ended before writing anything (a bad config, Ctrl-C at the UR5e's
+            // `yes`) leaves no empty run folder behind: `remove_dir` removes only an empty one.
+            let _ = std::fs::remove_dir(&dir);
             if let Some(dir) = e
                 .downcast_ref::<runtime::TrialEnded>()
                 .and_then(|t| t.dir.as_ref())
@@ -196,8 +199,7 @@ pub(crate) const PARTICIPANT_ID_PATTERN: &str = "[A-Za-z0-9_-]{1,32}";
 /// (issue 10: `--participant ../../x` was taken as given).
 pub(crate) fn participant_id(s: &str) -> Result<String, String> {
     let ok = (1..=32).contains(&s.len())
-        && s
-            .bytes()
+        && s.bytes()
             .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-');
     if ok {
         Ok(s.to_owned())
@@ -454,6 +456,41 @@ mod tests {
         // A file of that name is not a folder to write into: the next suffix is taken.
         std::fs::write(root.join("blocked"), "").unwrap();
         assert!(create_run_dir(&root.join("blocked")).is_ok_and(|d| d.ends_with("blocked-2")));
+    }
+
+    #[test]
+    fn a_trial_that_fails_before_writing_leaves_no_empty_run_folder() {
+        let tmp = tempfile::tempdir().unwrap();
+        let root = tmp.path().join("runs");
+        // Only the workspace file is missing: the others are the shipped ones.
+        let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+        let mut config = config::SHIPPED_TOML.to_owned();
+        for name in ["handover.toml", "policy-adaptive.toml", "assess.toml"] {
+            let path = shipped.join(name).display().to_string();
+            config = config.replace(&format!("\"{name}\""), &format!("{path:?}"));
+        }
+        config = config.replace("example-workspace.toml", "missing-workspace.toml");
+        let cfg = tmp.path().join("trial.toml");
+        std::fs::write(&cfg, config).unwrap();
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            args: TrialArgs,
+        }
+        let args = <Cli as clap::Parser>::try_parse_from([
+            "trial".as_ref(),
+            "--robot".as_ref(),
+            "sim".as_ref(),
+            "--config".as_ref(),
+            cfg.as_os_str(),
+            "--out-root".as_ref(),
+            root.as_os_str(),
+        ] as [&std::ffi::OsStr; 7])
+        .unwrap()
+        .args;
+        let e = format!("{:#}", run(args).unwrap_err());
+        assert!(e.contains("missing-workspace.toml"), "{e}");
+        assert_eq!(std::fs::read_dir(&root).unwrap().count(), 0);
     }
 
     #[test]
