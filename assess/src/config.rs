@@ -359,7 +359,7 @@ impl AssessConfig {
             return Err(AssessError::invalid(
                 "fusion.turn_lookback_frames",
                 format!(
-                    "must be in [1, {MAX_FRAMES}] (got {})",
+                    "must be ≥ 1 and ≤ {MAX_FRAMES} (got {})",
                     f.turn_lookback_frames
                 ),
             ));
@@ -374,7 +374,7 @@ impl AssessConfig {
         if m == 0 || m > MAX_FRAMES {
             return Err(AssessError::invalid(
                 "confirmation.window_frames",
-                format!("M must be in [1, {MAX_FRAMES}] (got {m})"),
+                format!("M must be ≥ 1 and ≤ {MAX_FRAMES} (got {m})"),
             ));
         }
         positive(
