@@ -1,5 +1,5 @@
-//! Benchmark of one `Controller::step` (task + OTG + QP + bookkeeping) over a whole simulated
-//! handover with a SIMULATED hand intruding during the approach (so the QP is active part of
+//! Benchmark of one `Controller::step` (task + path + time scaling with its lookahead + bookkeeping) over a whole simulated
+//! handover with a SIMULATED hand intruding during the approach (so the time scaling is active part of
 //! the time) and reaching the presented TCP.
 //!
 //! Criterion measures the mean cost of a step; a second pass times every single step of whole
@@ -9,7 +9,8 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use adapt::controller::{Controller, ControllerConfig, HumanPoints, MotionAdaptation};
+use adapt::controller::{Controller, ControllerConfig, MotionAdaptation, OperatorView};
+use robot_io::geometry::HumanBody;
 use adapt::task::Phase;
 use criterion::{Criterion, criterion_group, criterion_main};
 use robot_io::sim::{SimConfig, SimRobot};
@@ -67,7 +68,7 @@ impl World {
     }
 
     /// Everything around the step: read state, script the hand.
-    fn prepare(&mut self) -> HumanPoints {
+    fn prepare(&mut self) -> OperatorView {
         self.robot.read_state(&mut self.state).expect("read");
         let tcp = self.state.actual_tcp_pose;
         match self.ctl.phase() {
@@ -83,14 +84,18 @@ impl World {
             Phase::Present => self.move_hand([tcp[0] - 0.03, tcp[1], tcp[2]], 0.5),
             _ => self.move_hand(HAND_HOME, 0.5),
         }
-        HumanPoints {
-            head_m: Some([-1.45, -0.13, 0.75]),
-            left_hand_m: None,
-            right_hand_m: Some(self.hand),
+        OperatorView {
+            body: HumanBody {
+                head_m: Some([-1.45, -0.13, 0.75]),
+                left_hand_m: None,
+                right_hand_m: Some(self.hand),
+                torso: None,
+            },
+            perception_age_s: 0.0,
         }
     }
 
-    fn step(&mut self, humans: &HumanPoints) {
+    fn step(&mut self, humans: &OperatorView) {
         self.ctl.step(
             self.state.timestamp_s,
             &self.state,

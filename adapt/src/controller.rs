@@ -1,45 +1,55 @@
-//! The 500 Hz handover controller: task → trajectory → speed scaling → servo command.
+//! The 500 Hz handover controller: task → jerk-limited path → time scaling → servo command.
 //!
 //! [`Controller::new`] allocates everything; [`Controller::step`] allocates nothing (checked by
 //! `tests/controller_alloc.rs`) and never panics. One step:
 //! 1. **Task**: [`HandoverTask::step`] with the TCP position (forward kinematics of the
 //!    *measured* joints), whether the motion to the current target has finished, the operator's
 //!    hands, and the adaptation's timing (start delay, wait-for-attention, attention on robot).
-//! 2. **Trajectory** ([`Otg`]): the target follows the task phase (pick, handover, home or pick
-//!    again after a timeout). Limits are the nominal UR5e limits scaled by the adaptation:
-//!    velocity × speed scale, acceleration × smoothness, jerk × smoothness²
-//!    ([`MotionLimits::scaled`]). Entering Approach sets the minimum approach duration; any
-//!    later replan of the approach keeps its arrival time (it passes the remaining time).
-//! 3. **Speed scaling** ([`SpeedScaler`]): the trajectory's velocity is the reference `q̇_ref`;
-//!    the QP keeps it within the nominal joint velocity and acceleration limits (π rad/s,
-//!    π rad/s²: full braking authority stays available whatever the smoothness), within the TCP
-//!    cap `max_tcp_speed_m_s × speed scale`, and keeps the TCP, wrist and elbow
-//!    ([`robot_io::kinematics::control_points`] at the measured joints) within the separation
-//!    speeds toward the head and both hands.
-//! 4. **Command**: when the QP passes the reference through, the commanded state is the
-//!    trajectory's (exact positions, no integration drift). When it changes it, the commanded
-//!    position integrates the scaled velocity (trapezoid) and the trajectory generator is reset
-//!    to the commanded state, so the motion resumes jerk-limited from where it really is.
-//! 5. **Bookkeeping**: task context (C, G, phase), events of this step, last [`QpStatus`] and
-//!    [`PlanStatus`], the reference and commanded velocities, counters.
+//! 2. **Path** ([`Path`]): when the target (the task phase), the adaptation's scales or C(t)
+//!    change, a new jerk-limited path is planned from the current path state, so the executed
+//!    velocity and acceleration stay continuous. Its limits are the planner's (velocity ×
+//!    speed scale, acceleration × smoothness, jerk × smoothness²), kept inside the safety
+//!    supervisor's ([`SafetyEnvelope`]): joint speed at the planning fraction of the
+//!    supervisor's cap, and the TCP speed along the path under the planning fraction of the
+//!    supervisor's TCP cap — its collaboration value (0.25 m/s) whenever C(t) holds, so a path
+//!    planned for the approach already respects the cap that applies during it. Entering
+//!    Approach sets the minimum approach duration; any later replan keeps the arrival time.
+//! 3. **Time scaling** ([`TimeScale`], the approach of UR's speed slider and the ROS 2 scaled
+//!    joint trajectory controller): the path is run at `s = dτ/dt ∈ [0, 1]`, itself a
+//!    jerk-limited trajectory. Its target is the largest `s` from which every point of a
+//!    lookahead along the path can still be slowed to its admissible scale in time
+//!    ([`Envelope::admissible_scale`]: the supervisor's joint and TCP caps, perception
+//!    staleness, and ISO/TS 15066 separation from every tracked body part to every arm capsule,
+//!    with the operator's points predicted along their measured velocity). So the planner
+//!    slows *before* a cap applies or a hand comes close, and in nominal operation the
+//!    supervisor has nothing to correct. `ṡ_max` and `s̈_max` are chosen per path so the
+//!    executed acceleration and jerk stay within the planner's limits (`path` module docs).
+//! 4. **Command**: the path's position at τ ([`JointCommand::Servo`]); velocity `s q'` and
+//!    acceleration `ṡ q' + s² q''` are kept for logging. When more than one control period
+//!    elapsed since the last step (missed cycles on a loaded machine), the time scale advances
+//!    by the elapsed time, so the command is where the motion should be now.
+//! 5. **Override**: when the supervisor changed a command ([`Controller::command_overridden`]),
+//!    the next step re-synchronises to the robot's *target* state (what its own servo or
+//!    braking trajectory follows) and plans from there, with `s = 0` from rest: the motion
+//!    continues from where the robot really is, without a jump and without fighting the stop.
 //!
 //! # Command: servoJ, not speedJ
 //! The output is [`JointCommand::Servo`] with the commanded joint positions. A position command
 //! closes the loop on position, so the arm ends exactly at the handover pose and drift from
 //! integrating velocities cannot accumulate, and the supervisor can check positions directly.
 //! The defaults are `lookahead_s = 0.05` s and `gain = 500`: a short lookahead keeps the lag
-//! behind the (already jerk-limited, speed-scaled) command small — about 50 ms, i.e. ≤ 0.16 rad at
-//! π rad/s — so the separation monitoring acts on where the arm actually is; the gain is
+//! behind the (already jerk-limited, time-scaled) command small — about 50 ms, i.e. ≤ 0.16 rad
+//! at π rad/s — so the separation monitoring acts on where the arm actually is; the gain is
 //! mid-range of UR's [100, 2000] (ur_rtde's examples use 300; higher gains track tighter but ring
 //! on a real arm). Both are configurable.
 //!
 //! When the robot cannot move (safety stop, program not PLAYING, arm not RUNNING) or its state
 //! is not finite, the step outputs [`JointCommand::Stop`] at the nominal acceleration and
-//! re-synchronises to the measured joints on the next usable state.
+//! re-synchronises on the next usable state.
 //!
 //! # Example
 //! ```
-//! use adapt::controller::{Controller, ControllerConfig, HumanPoints, MotionAdaptation};
+//! use adapt::controller::{Controller, ControllerConfig, MotionAdaptation, OperatorView};
 //! use robot_io::sim::{SimConfig, SimRobot};
 //! use robot_io::{JointCommand, Robot, RobotState};
 //! let mut robot = SimRobot::new(SimConfig { initial_q_rad: adapt::task::IK_REFERENCE_Q_RAD, ..SimConfig::ur5e() })?;
@@ -48,7 +58,7 @@
 //! ctl.start_handover();
 //! for _ in 0..500 {
 //!     robot.read_state(&mut state)?;
-//!     ctl.step(state.timestamp_s, &state, &MotionAdaptation::default(), &HumanPoints::default(), &mut cmd);
+//!     ctl.step(state.timestamp_s, &state, &MotionAdaptation::default(), &OperatorView::default(), &mut cmd);
 //!     robot.send(&cmd)?;
 //!     robot.step();
 //! }
@@ -59,16 +69,17 @@
 use std::time::Duration;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use robot_io::geometry::{ARM_CAPSULES, BodyPart, HumanBody, Torso};
 use robot_io::kinematics::{ControlPoints, control_points, control_points_zeroed};
 use robot_io::{JointCommand, Joints, RobotState, robot_mode, runtime_state};
 use serde::Deserialize;
 
-use crate::otg::{LimitScale, MotionLimits, Otg, OtgState, PlanStatus};
-use crate::qp::{HumanPoint, N_JOINTS, QpConfig, QpInput, QpParams, QpStatus, SpeedScaler};
-use crate::ssm::{HumanPointKind, SsmConfig, SsmParams};
-use crate::task::{
-    EventBuffer, HandoverTask, Phase, RawTaskConfig, TaskConfig, TaskEvent, TaskInput,
+use crate::envelope::{
+    Binding, Envelope, PlanningMargins, RawPlanningMargins, SafetyEnvelope, flange_speed_m_s,
 };
+use crate::otg::{MotionLimits, PlanStatus};
+use crate::path::{PLAN_SAMPLES, Path, PathSample, PathState, ScaleLimits, TimeScale, scale_limits_for};
+use crate::task::{EventBuffer, HandoverTask, Phase, RawTaskConfig, TaskConfig, TaskEvent, TaskInput};
 use crate::{AdaptError, Result};
 
 /// Capacity of the per-step event buffer [events]; one step emits at most three.
@@ -106,10 +117,6 @@ macro_rules! unit_scale {
             /// The value [-] in (0, 1].
             pub fn get(self) -> f64 {
                 self.0
-            }
-
-            fn limit_scale(self) -> LimitScale {
-                LimitScale::new(self.0).unwrap_or(LimitScale::ONE)
             }
         }
 
@@ -156,17 +163,15 @@ impl Default for MotionAdaptation {
     }
 }
 
-/// The operator's tracked points in the robot base frame [m]; `None` when not tracked this
-/// cycle. Non-finite positions are treated as not tracked by the task, and make the speed
-/// scaling brake.
+/// What the controller knows of the operator this cycle.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct HumanPoints {
-    /// Head position [m].
-    pub head_m: Option<[f64; 3]>,
-    /// Left hand position [m].
-    pub left_hand_m: Option<[f64; 3]>,
-    /// Right hand position [m].
-    pub right_hand_m: Option<[f64; 3]>,
+pub struct OperatorView {
+    /// The operator's tracked body in the robot base frame (untracked parts `None`; a
+    /// non-finite value makes the time scale brake to 0).
+    pub body: HumanBody,
+    /// Age of the perception frame the body comes from [s] (the supervisor's staleness limits
+    /// apply to it).
+    pub perception_age_s: f64,
 }
 
 /// The controller's configuration as the config file gives it (`config/handover.toml`); see
@@ -196,17 +201,15 @@ pub struct RawControllerConfig {
     pub tool_offset_m: [f64; 3],
     /// The handover task.
     pub task: RawTaskConfig,
-    /// Separation monitoring (ISO/TS 15066).
-    pub ssm: SsmParams,
-    /// Speed-scaling solver.
-    pub qp: QpParams,
+    /// How far inside the safety supervisor's limits the planner stays.
+    pub planning: RawPlanningMargins,
 }
 
 /// The file layout of `config/handover.toml`: a single `[controller]` table.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RawHandoverFile {
-    /// The controller, with its task, SSM and QP tables.
+    /// The controller, with its task and planning tables.
     pub controller: RawControllerConfig,
 }
 
@@ -216,7 +219,7 @@ pub struct ControllerConfig {
     /// Control period [s], in (0, 0.1].
     pub cycle_s: f64,
     /// Nominal limits (velocity [rad/s], acceleration [rad/s²], jerk [rad/s³]) before the
-    /// adaptation scales them; also the QP's velocity and acceleration box.
+    /// adaptation scales them: the planner's own limits.
     pub limits: MotionLimits,
     /// TCP speed cap at speed scale 1 [m/s], > 0 (UR5e: 1 m/s).
     pub max_tcp_speed_m_s: f64,
@@ -232,14 +235,17 @@ pub struct ControllerConfig {
     pub tool_offset_m: [f64; 3],
     /// The handover task.
     pub task: TaskConfig,
-    /// Separation monitoring and the speed-scaling solver.
-    pub qp: QpConfig,
+    /// The safety supervisor's limits, which the plan stays inside (the binary sets them from
+    /// the supervisor's configuration; the default is [`SafetyEnvelope::ur5e`]).
+    pub envelope: SafetyEnvelope,
+    /// The margins inside them.
+    pub planning: PlanningMargins,
 }
 
 impl ControllerConfig {
     /// UR5e defaults around [`TaskConfig::example`]: 2 ms, π rad/s, π rad/s², 10π rad/s³,
     /// TCP 1 m/s, servoJ lookahead 0.05 s and gain 500, arrival within 0.005 rad and below
-    /// 0.02 rad/s, no tool offset, default SSM and QP parameters.
+    /// 0.02 rad/s, no tool offset, the UR5e supervisor envelope and default margins.
     pub fn example() -> ControllerConfig {
         ControllerConfig {
             cycle_s: crate::otg::UR5E_CYCLE_S,
@@ -251,7 +257,8 @@ impl ControllerConfig {
             settle_speed_rad_s: 0.02,
             tool_offset_m: [0.0; 3],
             task: TaskConfig::example(),
-            qp: QpConfig::default(),
+            envelope: SafetyEnvelope::ur5e(),
+            planning: PlanningMargins::default(),
         }
     }
 
@@ -335,7 +342,8 @@ impl TryFrom<&RawControllerConfig> for ControllerConfig {
             settle_speed_rad_s: raw.settle_speed_rad_s,
             tool_offset_m: raw.tool_offset_m,
             task: TaskConfig::try_from(&raw.task)?,
-            qp: QpConfig::new(SsmConfig::try_from(raw.ssm)?, raw.qp)?,
+            envelope: SafetyEnvelope::ur5e(),
+            planning: PlanningMargins::try_from(raw.planning)?,
         };
         cfg.validate()?;
         Ok(cfg)
@@ -347,14 +355,186 @@ impl TryFrom<&RawControllerConfig> for ControllerConfig {
 pub struct ControllerStats {
     /// Steps run.
     pub steps: u64,
-    /// Steps in which the QP changed the reference velocity (speed scaling active).
+    /// Steps in which the time scale was below 1 (the plan ran slower than planned).
     pub scaled_steps: u64,
-    /// Steps whose QP status was a fallback ([`QpStatus::is_fallback`]).
+    /// Steps in which the time scale's own trajectory failed and a rate-limited ramp stood in.
     pub fallback_steps: u64,
-    /// Steps in which the trajectory generator failed (the reference was braked to rest).
+    /// Plans that failed (the motion was then brought to rest along the old path).
     pub otg_errors: u64,
     /// Steps that output a stop because the robot could not move or its state was unusable.
     pub stop_steps: u64,
+    /// Controller cycles that elapsed without a step (missed cycles caught up) [-].
+    pub missed_cycles: u64,
+    /// Re-synchronisations to the robot's target state (start, after a stop or an override).
+    pub resyncs: u64,
+    /// Plans computed (targets, limit changes and re-synchronisations).
+    pub plans: u64,
+}
+
+/// What set the time scale's target in the last step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScaleReport {
+    /// The time scale s [-] after the step.
+    pub scale: f64,
+    /// The target it moved toward [-].
+    pub target: f64,
+    /// The admissible scale now, at the current path point [-].
+    pub admissible_now: f64,
+    /// The limit that bound the target (at the most restrictive lookahead sample).
+    pub binding: Binding,
+    /// Smallest body-to-arm surface distance now [m] (∞ with nobody tracked).
+    pub min_distance_m: f64,
+}
+
+/// Lookahead samples along the path for the time-scale target [-].
+const LOOKAHEAD_SAMPLES: usize = 10;
+/// Share of the reachable drop of `s` the lookahead counts on [-] (the rest is margin for a
+/// rate that is still rising).
+const DROP_SHARE: f64 = 0.7;
+/// The path's own acceleration and jerk as fractions of the planner's (the rest is the time
+/// scale's budget, see `path`'s module docs) [-].
+const PATH_ACC_SHARE: f64 = 0.6;
+const PATH_JERK_SHARE: f64 = 0.6;
+/// Executed acceleration stays below this share of the supervisor's acceleration cap [-].
+const SUPERVISOR_ACC_SHARE: f64 = 0.95;
+/// Iterations that shrink the path's velocity limit until its TCP speed meets the cap.
+const TCP_PLAN_ITERATIONS: usize = 4;
+/// How long the robot must stand settled at a target before the motion counts as finished
+/// [s].
+const SETTLE_DWELL_S: f64 = 0.25;
+/// A robot whose target joint speeds are all below this is at rest for a re-synchronisation
+/// [rad/s].
+const REST_SPEED_RAD_S: f64 = 1e-3;
+/// The most cycles one step catches up after missed cycles [-].
+const MAX_CATCH_UP_CYCLES: f64 = 25.0;
+
+/// Tracks the operator's points between perception frames: last position and a smoothed
+/// velocity per point, for the lookahead's prediction. Allocates nothing.
+#[derive(Debug, Clone, Copy, Default)]
+struct HumanTracker {
+    points: [TrackedPoint; 4],
+    torso_normal: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+struct TrackedPoint {
+    last: Option<[f64; 3]>,
+    since_s: f64,
+    velocity: [f64; 3],
+    /// When the point was last tracked [s].
+    seen_s: f64,
+    /// Whether it is tracked now (else `last` is held for [`HOLD_LOST_S`]).
+    tracked: bool,
+}
+
+/// How long the planner keeps a body point that perception lost at its last position [s]: a
+/// hand that drops out for a moment and comes back where it was must not surprise the time
+/// scale (the supervisor, independently, watches only what is tracked).
+const HOLD_LOST_S: f64 = 1.0;
+/// Share of a new velocity sample taken into a body point's smoothed velocity (per perception
+/// frame) [-].
+const VELOCITY_SMOOTHING: f64 = 0.3;
+/// A body point slower than this is not extrapolated [m/s].
+const VELOCITY_DEAD_BAND_M_S: f64 = 0.15;
+/// A body point is extrapolated along its velocity at most this far ahead [s].
+const PREDICTION_HORIZON_S: f64 = 0.5;
+
+impl TrackedPoint {
+    fn update(&mut self, p: Option<[f64; 3]>, now: f64, max_speed: f64) {
+        let Some(p) = p.filter(|p| p.iter().all(|v| v.is_finite())) else {
+            if self.tracked {
+                self.tracked = false;
+                self.velocity = [0.0; 3];
+            }
+            if now - self.seen_s > HOLD_LOST_S {
+                *self = TrackedPoint::default();
+            }
+            return;
+        };
+        self.tracked = true;
+        self.seen_s = now;
+        match self.last {
+            Some(last) if last != p => {
+                let dt = now - self.since_s;
+                if dt > 1e-6 && dt < 0.5 {
+                    let mut v = [0.0; 3];
+                    for ((v, a), b) in v.iter_mut().zip(&p).zip(&last) {
+                        *v = (a - b) / dt;
+                    }
+                    let speed = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                    if speed > max_speed {
+                        for x in &mut v {
+                            *x *= max_speed / speed;
+                        }
+                    }
+                    for (s, n) in self.velocity.iter_mut().zip(v) {
+                        *s += VELOCITY_SMOOTHING * (n - *s);
+                    }
+                } else {
+                    self.velocity = [0.0; 3];
+                }
+                self.last = Some(p);
+                self.since_s = now;
+            }
+            Some(_) => {}
+            None => {
+                self.last = Some(p);
+                self.since_s = now;
+                self.velocity = [0.0; 3];
+            }
+        }
+    }
+
+    fn predict(&self, h_s: f64) -> Option<[f64; 3]> {
+        let v = self.velocity;
+        let speed = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        // Perception jitter is not motion: below the dead band the point is taken as still.
+        let h = if speed < VELOCITY_DEAD_BAND_M_S {
+            0.0
+        } else {
+            h_s.clamp(0.0, PREDICTION_HORIZON_S)
+        };
+        self.last
+            .map(|p| [p[0] + v[0] * h, p[1] + v[1] * h, p[2] + v[2] * h])
+    }
+}
+
+impl HumanTracker {
+    fn update(&mut self, body: &HumanBody, now: f64, envelope: &SafetyEnvelope) {
+        let sep = envelope.separation();
+        let [head, left, right, torso] = &mut self.points;
+        head.update(body.head_m, now, sep.human_speed_m_s(BodyPart::Head));
+        left.update(body.left_hand_m, now, sep.human_speed_m_s(BodyPart::LeftHand));
+        right.update(body.right_hand_m, now, sep.human_speed_m_s(BodyPart::RightHand));
+        torso.update(
+            body.torso.map(|t| t.shoulder_mid_m),
+            now,
+            sep.human_speed_m_s(BodyPart::Torso),
+        );
+    }
+
+    /// The body as the planner takes it now: tracked points as given, lost ones held at their
+    /// last position for [`HOLD_LOST_S`]; the torso's normal is remembered with it.
+    fn effective(&mut self, body: &HumanBody) -> HumanBody {
+        if let Some(t) = body.torso {
+            self.torso_normal = Some(t.normal);
+        }
+        self.predict(0.0)
+    }
+
+    /// The body `h_s` [s] ahead (points moved along their smoothed velocity).
+    fn predict(&self, h_s: f64) -> HumanBody {
+        let [head, left, right, torso] = &self.points;
+        HumanBody {
+            head_m: head.predict(h_s),
+            left_hand_m: left.predict(h_s),
+            right_hand_m: right.predict(h_s),
+            torso: torso.predict(h_s).map(|p| Torso {
+                shoulder_mid_m: p,
+                normal: self.torso_normal.unwrap_or([1.0, 0.0, 0.0]),
+            }),
+        }
+    }
 }
 
 /// The 500 Hz controller (see the module docs).
@@ -363,25 +543,33 @@ pub struct Controller {
     cfg: ControllerConfig,
     task: HandoverTask,
     events: EventBuffer<EVENT_CAPACITY>,
-    otg: Otg,
-    reference: OtgState,
-    scaler: SpeedScaler,
-    qp_input: QpInput,
+    path: Path,
+    scale: TimeScale,
+    envelope: Envelope,
+    humans: HumanTracker,
+    /// The path at the current path time.
+    sample: PathSample,
+    lookahead: PathSample,
     points: ControlPoints,
     tool: Isometry3<f64>,
-    /// Commanded joint positions [rad] and velocities [rad/s].
+    /// Commanded joint positions [rad], velocities [rad/s] and accelerations [rad/s²].
     q_cmd: Joints,
     qd_cmd: Joints,
+    qdd_cmd: Joints,
     synced: bool,
-    /// The target given to the trajectory generator [rad].
+    /// The target given to the path [rad].
     target: Option<Joints>,
     /// Absolute arrival time the current approach must not beat [s].
     arrive_not_before_s: Option<f64>,
-    /// The adaptation scales behind the trajectory limits in force.
+    /// The adaptation scales behind the path limits in force.
     applied_scales: (f64, f64),
+    /// C(t) when the current path was planned (its TCP cap).
+    planned_collaborating: bool,
     last_plan: PlanStatus,
-    last_qp: QpStatus,
-    last_now_s: f64,
+    last_now_s: Option<f64>,
+    /// Since when the robot stands settled at its target [s].
+    settled_since_s: Option<f64>,
+    report: ScaleReport,
     stats: ControllerStats,
 }
 
@@ -389,35 +577,43 @@ impl Controller {
     /// Build the controller: validates `cfg` and allocates everything the steps use.
     ///
     /// # Errors
-    /// [`AdaptError::InvalidValue`] (and the trajectory and QP set-up errors) for a bad config.
+    /// [`AdaptError::InvalidValue`] (and the trajectory set-up errors) for a bad config.
     pub fn new(cfg: ControllerConfig) -> Result<Controller> {
         cfg.validate()?;
-        let otg = Otg::new(cfg.cycle_s, cfg.limits)?;
-        let scaler = SpeedScaler::new(cfg.qp)?;
         let [x, y, z] = cfg.tool_offset_m;
+        let initial_scale = ScaleLimits::new(
+            cfg.planning.get().max_scale_rate_per_s,
+            cfg.planning.get().max_scale_accel_per_s2,
+        )?;
         Ok(Controller {
             task: HandoverTask::new(cfg.task),
             events: EventBuffer::new(),
-            otg,
-            reference: OtgState::default(),
-            scaler,
-            qp_input: QpInput {
-                dt_s: cfg.cycle_s,
-                max_velocity: *cfg.limits.max_velocity(),
-                max_acceleration: *cfg.limits.max_acceleration(),
-                ..QpInput::default()
-            },
+            path: Path::new(cfg.limits),
+            scale: TimeScale::new(initial_scale),
+            envelope: Envelope::new(cfg.envelope, cfg.planning),
+            humans: HumanTracker::default(),
+            sample: PathSample::default(),
+            lookahead: PathSample::default(),
             points: control_points_zeroed(),
             tool: Isometry3::from_parts(Translation3::new(x, y, z), UnitQuaternion::identity()),
             q_cmd: [0.0; 6],
             qd_cmd: [0.0; 6],
+            qdd_cmd: [0.0; 6],
             synced: false,
             target: None,
             arrive_not_before_s: None,
             applied_scales: (1.0, 1.0),
+            planned_collaborating: false,
             last_plan: PlanStatus::Finished,
-            last_qp: QpStatus::Solved,
-            last_now_s: 0.0,
+            last_now_s: None,
+            settled_since_s: None,
+            report: ScaleReport {
+                scale: 1.0,
+                target: 1.0,
+                admissible_now: 1.0,
+                binding: Binding::None,
+                min_distance_m: f64::INFINITY,
+            },
             stats: ControllerStats::default(),
             cfg,
         })
@@ -463,19 +659,27 @@ impl Controller {
         self.events.as_slice()
     }
 
-    /// The QP status of the last step.
-    pub fn last_qp_status(&self) -> QpStatus {
-        self.last_qp
-    }
-
-    /// The trajectory status of the last step.
+    /// The trajectory status of the last step (Finished once the path's end is reached).
     pub fn last_plan_status(&self) -> PlanStatus {
         self.last_plan
     }
 
-    /// The trajectory's state of the last step (the QP's reference; velocity [rad/s]).
-    pub fn reference(&self) -> &OtgState {
-        &self.reference
+    /// The time scale of the last step and what bound it.
+    pub fn scale_report(&self) -> &ScaleReport {
+        &self.report
+    }
+
+    /// The planner's jerk limit in force [rad/s³] (largest over the joints): the nominal jerk
+    /// × smoothness², which the executed motion stays within (see `path`'s module docs).
+    pub fn jerk_limit_rad_s3(&self) -> f64 {
+        let smooth = self.applied_scales.1;
+        self.cfg
+            .limits
+            .max_jerk()
+            .iter()
+            .fold(0.0_f64, |m, j| m.max(*j))
+            * smooth
+            * smooth
     }
 
     /// The commanded joint positions of the last step [rad].
@@ -483,14 +687,24 @@ impl Controller {
         &self.q_cmd
     }
 
-    /// The commanded joint velocities of the last step [rad/s] (after speed scaling).
+    /// The commanded joint velocities of the last step [rad/s] (s · q'(τ)).
     pub fn commanded_velocity(&self) -> &Joints {
         &self.qd_cmd
+    }
+
+    /// The commanded joint accelerations of the last step [rad/s²] (ṡ q' + s² q'').
+    pub fn commanded_acceleration(&self) -> &Joints {
+        &self.qdd_cmd
     }
 
     /// The control points (TCP, wrist, elbow) of the last step, at the measured joints.
     pub fn control_points(&self) -> &ControlPoints {
         &self.points
+    }
+
+    /// The arm's capsules at joints `q` [rad] under the envelope's arm model.
+    pub fn arm_capsules(&self, q: &Joints, out: &mut [robot_io::geometry::Capsule; ARM_CAPSULES]) {
+        self.cfg.envelope.arm().capsules(q, out);
     }
 
     /// Counters since construction.
@@ -499,37 +713,52 @@ impl Controller {
     }
 
     /// Tells the controller that its last command was not executed as sent (the safety
-    /// supervisor reduced it or replaced it by a stop): the next step re-synchronises the
-    /// trajectory to the measured joints instead of continuing a plan the robot did not
-    /// follow (which would imply an acceleration jump at the next command).
+    /// supervisor reduced it or replaced it by a stop): the next step re-synchronises to the
+    /// robot's target state and re-plans from there, so the motion continues smoothly from
+    /// where the robot really is instead of fighting the supervisor.
     pub fn command_overridden(&mut self) {
         self.synced = false;
     }
 
-    /// One 2 ms cycle at time `now_s` [s] (injected; a non-finite value advances the last time
-    /// by one cycle): read `state`, run task → trajectory → speed scaling, write `out`.
-    /// Allocates nothing, never panics.
+    /// One cycle at time `now_s` [s] (the controller timestamp of `state`; a non-finite value
+    /// advances the last time by one cycle): read `state`, run task → path → time scaling, write
+    /// `out`. When more than one control period has passed since the last step (missed cycles),
+    /// the plan is advanced by the elapsed time, so the command is where the motion should be
+    /// now. Allocates nothing, never panics.
     pub fn step(
         &mut self,
         now_s: f64,
         state: &RobotState,
         adaptation: &MotionAdaptation,
-        humans: &HumanPoints,
+        view: &OperatorView,
         out: &mut JointCommand,
     ) {
-        let now = if now_s.is_finite() {
-            now_s
-        } else {
-            self.last_now_s + self.cfg.cycle_s
+        let humans = &view.body;
+        let cycle = self.cfg.cycle_s;
+        let (now, elapsed) = match self.last_now_s {
+            None => (if now_s.is_finite() { now_s } else { 0.0 }, 1.0),
+            Some(last) => {
+                let now = if now_s.is_finite() && now_s > last {
+                    now_s
+                } else {
+                    last + cycle
+                };
+                let n = ((now - last) / cycle).round().clamp(1.0, MAX_CATCH_UP_CYCLES);
+                (now, n)
+            }
         };
-        self.last_now_s = now;
+        self.last_now_s = Some(now);
         self.stats.steps = self.stats.steps.saturating_add(1);
+        self.stats.missed_cycles = self.stats.missed_cycles.saturating_add(elapsed as u64 - 1);
         self.events.clear();
+        self.humans.update(humans, now, &self.cfg.envelope);
 
         let state_ok = state
             .actual_q
             .iter()
             .chain(&state.actual_qd)
+            .chain(&state.target_q)
+            .chain(&state.target_qd)
             .all(|v| v.is_finite());
         let can_move = state_ok
             && !state.is_safety_stopped()
@@ -541,7 +770,7 @@ impl Controller {
         control_points(&q_meas, &self.tool, &mut self.points);
 
         // 1. Task.
-        let finished = can_move && self.arrived(state);
+        let finished = can_move && self.arrived(state, now);
         let hand = |h: Option<[f64; 3]>| h.filter(|p| p.iter().all(|v| v.is_finite()));
         let tcp = self
             .points
@@ -562,98 +791,103 @@ impl Controller {
             self.stats.stop_steps = self.stats.stop_steps.saturating_add(1);
             self.synced = false;
             self.qd_cmd = [0.0; 6];
+            self.qdd_cmd = [0.0; 6];
             *out = JointCommand::Stop {
                 decel: self.max_acceleration(),
             };
             return;
         }
-        if !self.synced {
-            self.resync(state);
-        }
 
-        // 2. Trajectory: limits and target.
+        // 2. Path: limits, target and the collaboration cap it was planned under.
         let scales = (
             adaptation.speed_scale.get(),
             adaptation.smoothness_scale.get(),
         );
+        let collaborating = self.task.collaborating();
         let mut replan = false;
         if scales != self.applied_scales {
             self.applied_scales = scales;
-            let limits = self.cfg.limits.scaled(
-                adaptation.speed_scale.limit_scale(),
-                adaptation.smoothness_scale.limit_scale(),
-            );
-            self.otg.set_limits(&limits);
+            replan = true;
+        }
+        if collaborating != self.planned_collaborating {
             replan = true;
         }
         let wanted = self.task.target_q_rad().copied();
-        if let Some(target) = wanted
-            && self.target != Some(target)
-        {
-            self.target = Some(target);
+        if wanted != self.target {
+            self.target = wanted;
             let min = adaptation.min_approach_duration.as_secs_f64();
-            self.arrive_not_before_s =
-                (self.task.phase() == Phase::Approach && min > 0.0).then_some(now + min);
+            self.arrive_not_before_s = (self.task.phase() == Phase::Approach
+                && min.is_finite()
+                && min > 0.0)
+                .then_some(now + min);
             replan = true;
         }
-        if replan {
-            self.set_otg_target(now);
-        }
-        let dt = self.cfg.cycle_s;
-        match self.otg.step(&mut self.reference) {
-            Ok(status) => self.last_plan = status,
-            Err(_) => {
-                // No trajectory: brake the reference to rest (the QP limits the deceleration).
-                self.stats.otg_errors = self.stats.otg_errors.saturating_add(1);
-                self.last_plan = PlanStatus::Working;
-                self.reference.position = self.q_cmd;
-                self.reference.velocity = [0.0; 6];
-                self.reference.acceleration = [0.0; 6];
+        // A path that starts at rest may start at any scale (the executed velocity s·q' and
+        // acceleration s²q'' are 0 either way): it starts at the lookahead's target instead of
+        // having to ramp down to it.
+        let mut from_rest = false;
+        if !self.synced {
+            if state.target_qd.iter().any(|v| v.abs() > REST_SPEED_RAD_S) {
+                // Overridden while moving: let the robot finish braking (our own stop, at the
+                // supervisor's deceleration) and resume from rest, instead of re-accelerating
+                // into the limit that just stopped it.
+                self.qd_cmd = state.target_qd;
+                self.qdd_cmd = [0.0; 6];
+                *out = JointCommand::Stop {
+                    decel: self.cfg.envelope.stop_deceleration_rad_s2(),
+                };
+                return;
             }
+            from_rest = self.resync(state, now);
+        } else if replan {
+            // A new path from where the current one is now (path coordinates): the executed
+            // velocity s·q' and acceleration ṡq' + s²q'' stay continuous.
+            let start = PathState {
+                position: self.sample.position,
+                velocity: self.sample.velocity,
+                acceleration: self.sample.acceleration,
+            };
+            from_rest = start.velocity.iter().chain(&start.acceleration).all(|x| *x == 0.0);
+            self.plan_from(&start, now);
         }
 
-        // 3. Speed scaling.
-        self.fill_qp_input(adaptation, humans);
-        let mut qd = [0.0; N_JOINTS];
-        self.last_qp = self.scaler.solve(&self.qp_input, &mut qd);
-        if self.last_qp.is_fallback() {
-            self.stats.fallback_steps = self.stats.fallback_steps.saturating_add(1);
+        // 3. Time scaling: the largest target the lookahead allows, then one jerk-limited step.
+        let s_target = self.scale_target(humans, view.perception_age_s, collaborating);
+        if from_rest {
+            self.scale.reset(0.0, s_target);
         }
+        self.scale.step(s_target, elapsed * cycle);
+        let s = self.scale.s();
+        let s_dot = self.scale.s_dot();
+        let tau = self.scale.tau();
+        self.path.sample(tau, &mut self.sample);
+        self.last_plan = if tau >= self.path.duration_s() {
+            PlanStatus::Finished
+        } else {
+            PlanStatus::Working
+        };
+        if s < 1.0 - 1e-9 && self.last_plan == PlanStatus::Working {
+            self.stats.scaled_steps = self.stats.scaled_steps.saturating_add(1);
+        }
+        self.stats.fallback_steps = self.scale.errors();
+        self.report.scale = s;
+        self.report.target = s_target;
 
         // 4. Command.
-        let changed = qd
-            .iter()
-            .zip(&self.reference.velocity)
-            .any(|(a, b)| (a - b).abs() > 1e-9);
-        if changed {
-            self.stats.scaled_steps = self.stats.scaled_steps.saturating_add(1);
-            let max_acc = self.otg.limits().max_acceleration();
-            let mut acc = [0.0; 6];
-            for i in 0..N_JOINTS {
-                let (Some(q), Some(v), Some(a), Some(&new), Some(&amax)) = (
-                    self.q_cmd.get_mut(i),
-                    self.qd_cmd.get(i),
-                    acc.get_mut(i),
-                    qd.get(i),
-                    max_acc.get(i),
-                ) else {
-                    continue;
-                };
-                *q += 0.5 * (v + new) * dt;
-                *a = ((new - v) / dt).clamp(-amax, amax);
-            }
-            self.qd_cmd = qd;
-            // Resume the trajectory from the commanded state.
-            if self
-                .otg
-                .set_current_state(&self.q_cmd, &self.qd_cmd, &acc)
-                .is_ok()
-            {
-                self.set_otg_target(now);
-            }
-        } else {
-            self.q_cmd = self.reference.position;
-            self.qd_cmd = self.reference.velocity;
+        for i in 0..6 {
+            let (Some(q), Some(v), Some(a), Some(p), Some(pv), Some(pa)) = (
+                self.q_cmd.get_mut(i),
+                self.qd_cmd.get_mut(i),
+                self.qdd_cmd.get_mut(i),
+                self.sample.position.get(i),
+                self.sample.velocity.get(i),
+                self.sample.acceleration.get(i),
+            ) else {
+                continue;
+            };
+            *q = *p;
+            *v = s * pv;
+            *a = s_dot * pv + s * s * pa;
         }
         let limit = crate::otg::UR5E_JOINT_LIMIT_RAD;
         for q in &mut self.q_cmd {
@@ -676,76 +910,203 @@ impl Controller {
             .fold(f64::INFINITY, f64::min)
     }
 
-    /// Whether the robot stands at the current target: trajectory finished, every joint within
-    /// the settle tolerance and slower than the settle speed.
-    fn arrived(&self, state: &RobotState) -> bool {
-        let Some(target) = self.task.target_q_rad() else {
+    /// Whether the robot stands at the current target: path finished, every joint within the
+    /// settle tolerance and slower than the settle speed, continuously for [`SETTLE_DWELL_S`]
+    /// (so the servo's lag has died out before the next motion starts: no direction reversal
+    /// on a still-moving arm).
+    fn arrived(&mut self, state: &RobotState, now: f64) -> bool {
+        let settled = match self.task.target_q_rad() {
+            None => false,
+            Some(target) => {
+                self.synced
+                    && self.target.as_ref() == Some(target)
+                    && self.last_plan == PlanStatus::Finished
+                    && state
+                        .actual_q
+                        .iter()
+                        .zip(target)
+                        .all(|(q, t)| (q - t).abs() <= self.cfg.settle_tolerance_rad)
+                    && state
+                        .actual_qd
+                        .iter()
+                        .all(|v| v.abs() <= self.cfg.settle_speed_rad_s)
+            }
+        };
+        if !settled {
+            self.settled_since_s = None;
             return false;
-        };
-        self.synced
-            && self.target.as_ref() == Some(target)
-            && self.last_plan == PlanStatus::Finished
-            && state
-                .actual_q
-                .iter()
-                .zip(target)
-                .all(|(q, t)| (q - t).abs() <= self.cfg.settle_tolerance_rad)
-            && state
-                .actual_qd
-                .iter()
-                .all(|v| v.abs() <= self.cfg.settle_speed_rad_s)
+        }
+        let since = *self.settled_since_s.get_or_insert(now);
+        now - since >= SETTLE_DWELL_S - 1e-9
     }
 
-    /// Start from the measured state at rest-or-moving (velocity as measured, no acceleration).
-    fn resync(&mut self, state: &RobotState) {
-        self.q_cmd = state.actual_q;
-        self.qd_cmd = state.actual_qd;
-        self.reference.position = state.actual_q;
-        self.reference.velocity = state.actual_qd;
-        if self
-            .otg
-            .set_current_state(&state.actual_q, &state.actual_qd, &[0.0; 6])
-            .is_ok()
-        {
-            self.synced = true;
-        }
-        if self.target.is_some() {
-            self.set_otg_target(self.last_now_s);
-        }
+    /// Start again from the robot's own target state (what its servo loop follows: after a
+    /// stop it is the robot's braking trajectory), so the first command continues it.
+    /// Returns whether the robot is at rest (its target velocity is 0).
+    fn resync(&mut self, state: &RobotState, now: f64) -> bool {
+        self.stats.resyncs = self.stats.resyncs.saturating_add(1);
+        let start = PathState {
+            position: state.target_q,
+            velocity: state.target_qd,
+            acceleration: [0.0; 6],
+        };
+        let moving = state.target_qd.iter().any(|v| v.abs() > 1e-3);
+        self.q_cmd = state.target_q;
+        self.qd_cmd = state.target_qd;
+        self.qdd_cmd = [0.0; 6];
+        self.plan_from(&start, now);
+        // A moving robot continues at s = 1 (the path starts at its velocity); from rest the
+        // step starts the scale at its target.
+        self.scale.reset(0.0, if moving { 1.0 } else { 0.0 });
+        self.path.sample(0.0, &mut self.sample);
+        self.synced = true;
+        !moving
     }
 
-    /// (Re)send the current target, with the remaining minimum approach time.
-    fn set_otg_target(&mut self, now: f64) {
-        let Some(target) = self.target else {
-            return;
-        };
+    /// Plan a new path from `start` (path coordinates) to the target (or to rest where it is,
+    /// without one), under the adaptation's limits and the TCP cap of the current phase;
+    /// restart path time at 0, keeping the scale and its rate.
+    fn plan_from(&mut self, start: &PathState, now: f64) {
+        self.stats.plans = self.stats.plans.saturating_add(1);
+        let collaborating = self.task.collaborating();
+        self.planned_collaborating = collaborating;
+        let target = self.target.unwrap_or(start.position);
         let min = self
             .arrive_not_before_s
             .map(|t| t - now)
             .filter(|r| *r > 0.0);
-        if self.otg.set_target(&target, min).is_err() {
-            self.stats.otg_errors = self.stats.otg_errors.saturating_add(1);
+        let (speed, smooth) = self.applied_scales;
+        let env = self.cfg.envelope;
+        let fraction = self.cfg.planning.get().speed_fraction;
+        // The path's own limits: the adaptation's share of the planner's limits, inside the
+        // supervisor's, leaving the time scale its acceleration and jerk budget.
+        let v_cap = fraction * env.joint_speed_rad_s();
+        let a_cap = SUPERVISOR_ACC_SHARE * env.joint_acceleration_rad_s2();
+        let mut v = [0.0; 6];
+        let mut a = [0.0; 6];
+        let mut j = [0.0; 6];
+        for i in 0..6 {
+            let (Some(v), Some(a), Some(j), Some(nv), Some(na), Some(nj)) = (
+                v.get_mut(i),
+                a.get_mut(i),
+                j.get_mut(i),
+                self.cfg.limits.max_velocity().get(i),
+                self.cfg.limits.max_acceleration().get(i),
+                self.cfg.limits.max_jerk().get(i),
+            ) else {
+                continue;
+            };
+            *v = (nv * speed).min(v_cap);
+            *a = PATH_ACC_SHARE * (na * smooth).min(a_cap);
+            *j = PATH_JERK_SHARE * nj * smooth * smooth;
         }
-    }
-
-    fn fill_qp_input(&mut self, adaptation: &MotionAdaptation, humans: &HumanPoints) {
-        let input = &mut self.qp_input;
-        input.qd_ref = self.reference.velocity;
-        input.qd_prev = self.qd_cmd;
-        input.tcp_speed_cap_m_s = self.cfg.max_tcp_speed_m_s * adaptation.speed_scale.get();
-        for (slot, p) in input.control_points.iter_mut().zip(&self.points) {
-            slot.position = [p.position.x, p.position.y, p.position.z];
-            for (r, row) in slot.jacobian.iter_mut().enumerate() {
-                for (c, v) in row.iter_mut().enumerate() {
-                    *v = p.jacobian.get((r, c)).copied().unwrap_or(0.0);
-                }
+        let tcp_cap = self
+            .envelope
+            .planned_tcp_cap_m_s(collaborating)
+            .min(self.cfg.max_tcp_speed_m_s * speed);
+        let mut ok = false;
+        for _ in 0..TCP_PLAN_ITERATIONS {
+            let Ok(limits) = MotionLimits::new(v, a, j) else {
+                break;
+            };
+            if self.path.plan(start, &target, &limits, min).is_err() {
+                break;
+            }
+            ok = true;
+            let peak = self.peak_tcp_speed();
+            if !(peak > tcp_cap) {
+                break;
+            }
+            // Shrink the velocity limits by the overshoot (with a 5 % margin) and plan again.
+            let k = 0.95 * tcp_cap / peak;
+            for x in &mut v {
+                *x = (*x * k).max(1e-3);
             }
         }
-        let point = |p: Option<[f64; 3]>, kind| p.map(|position| HumanPoint { position, kind });
-        input.humans = [
-            point(humans.head_m, HumanPointKind::Head),
-            point(humans.left_hand_m, HumanPointKind::Hand),
-            point(humans.right_hand_m, HumanPointKind::Hand),
-        ];
+        if !ok {
+            self.stats.otg_errors = self.stats.otg_errors.saturating_add(1);
+        }
+        self.scale.set_tau(0.0);
+        // The time scale's limits for this path (the `path` module docs' budgets).
+        let jerk_limit = self.jerk_limit_rad_s3();
+        let acc_limit = self
+            .cfg
+            .limits
+            .max_acceleration()
+            .iter()
+            .fold(f64::INFINITY, |m, x| m.min(*x))
+            * smooth;
+        let acc_budget = (a_cap.min(acc_limit) * (1.0 - PATH_ACC_SHARE)).max(1e-6);
+        let jerk_budget = (jerk_limit * (1.0 - PATH_JERK_SHARE)).max(1e-6);
+        let planning = self.cfg.planning.get();
+        self.scale.set_limits(scale_limits_for(
+            self.path.max_velocity(),
+            self.path.max_acceleration(),
+            acc_budget,
+            jerk_budget,
+            planning.max_scale_rate_per_s,
+            planning.max_scale_accel_per_s2,
+        ));
+    }
+
+    /// The largest flange speed along the current path at s = 1 [m/s] (sampled).
+    fn peak_tcp_speed(&mut self) -> f64 {
+        let d = self.path.duration_s();
+        let mut peak = 0.0_f64;
+        for k in 0..=PLAN_SAMPLES {
+            let tau = d * k as f64 / PLAN_SAMPLES as f64;
+            self.path.sample(tau, &mut self.lookahead);
+            let u = flange_speed_m_s(&self.lookahead.position, &self.lookahead.velocity);
+            peak = peak.max(if u.is_finite() { u } else { f64::INFINITY });
+        }
+        peak
+    }
+
+    /// The time scale's target: the largest `s` from which every lookahead sample's admissible
+    /// scale can still be reached in time (`s_k + reachable drop within h_k`), at most 1.
+    fn scale_target(&mut self, humans: &HumanBody, perception_age_s: f64, collaborating: bool) -> f64 {
+        let age = if perception_age_s.is_finite() {
+            perception_age_s.max(0.0)
+        } else {
+            f64::INFINITY
+        };
+        let limits = *self.scale.limits();
+        let horizon = (limits.full_stop_s() * 1.25).clamp(0.25, 2.0);
+        let tau0 = self.scale.tau();
+        let now_body = self.humans.effective(humans);
+        let mut target = 1.0_f64;
+        let mut binding = Binding::None;
+        for k in 0..=LOOKAHEAD_SAMPLES {
+            let h = horizon * k as f64 / LOOKAHEAD_SAMPLES as f64;
+            // Conservative: the path ahead as if it ran at full speed.
+            self.path.sample(tau0 + h, &mut self.lookahead);
+            // The operator as now and as predicted along their velocity, whichever binds: a
+            // point moving away is never counted on.
+            let body = self.humans.predict(h);
+            let q = self.lookahead.position;
+            let qd = self.lookahead.velocity;
+            let mut a = self
+                .envelope
+                .admissible_scale(&q, &qd, &now_body, age, collaborating);
+            if k > 0 {
+                let p = self
+                    .envelope
+                    .admissible_scale(&q, &qd, &body, age, collaborating);
+                if p.scale < a.scale {
+                    a = p;
+                }
+            }
+            if k == 0 {
+                self.report.admissible_now = a.scale;
+                self.report.min_distance_m = a.min_distance_m;
+            }
+            let lifted = a.scale + DROP_SHARE * limits.reachable_drop(h);
+            if lifted < target {
+                target = lifted;
+                binding = a.binding;
+            }
+        }
+        self.report.binding = binding;
+        target.clamp(0.0, 1.0)
     }
 }

@@ -48,6 +48,10 @@ mod error;
 // --- kinematics and trajectory generation ---
 pub mod ik;
 pub mod otg;
+pub mod path;
+
+// --- the planner's speed envelope near the operator ---
+pub mod envelope;
 
 // --- separation monitoring and QP speed scaling ---
 pub mod qp;

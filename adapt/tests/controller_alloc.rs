@@ -2,7 +2,8 @@
 //! closed-loop handover on `SimRobot`, with a SIMULATED hand that intrudes during the approach
 //! (speed scaling active) and then reaches the presented TCP.
 
-use adapt::controller::{Controller, ControllerConfig, HumanPoints, MotionAdaptation};
+use adapt::controller::{Controller, ControllerConfig, MotionAdaptation, OperatorView};
+use robot_io::geometry::HumanBody;
 use adapt::task::Phase;
 use hrc_adapt_tests::alloc_count::{CountingAllocator, allocations_in};
 use robot_io::sim::{SimConfig, SimRobot};
@@ -53,10 +54,14 @@ fn step_allocates_nothing_over_a_whole_handover() {
         for (h, g) in hand.iter_mut().zip(goal) {
             *h += (g - *h).clamp(-0.002, 0.002);
         }
-        let humans = HumanPoints {
-            head_m: Some([-1.45, -0.13, 0.75]),
-            left_hand_m: None,
-            right_hand_m: Some(hand),
+        let humans = OperatorView {
+            body: HumanBody {
+                head_m: Some([-1.45, -0.13, 0.75]),
+                left_hand_m: None,
+                right_hand_m: Some(hand),
+                torso: None,
+            },
+            perception_age_s: 0.0,
         };
         let ((), n) =
             allocations_in(|| ctl.step(state.timestamp_s, &state, &adaptation, &humans, &mut cmd));

@@ -19,6 +19,10 @@ const SERVO_GAIN_RANGE: (f64, f64) = (100.0, 2000.0);
 const TCP_SCALE_MARGIN: f64 = 1e-3;
 /// Relative tolerance of the final re-check against rounding [-].
 const RECHECK_TOLERANCE: f64 = 1e-9;
+/// A servo step is judged over the controller time elapsed since the previous servo command,
+/// at most this many control cycles (a longer gap is judged as if it were this long, which
+/// overstates the implied speed: conservative) [-].
+const MAX_COMMAND_PERIOD_CYCLES: f64 = 8.0;
 
 /// What the supervisor knows of the world outside the robot in this cycle.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -78,6 +82,8 @@ impl SafeCommand {
 struct ServoReference {
     q: Joints,
     v: Joints,
+    /// Controller timestamp of the state the command was judged on [s].
+    timestamp_s: f64,
 }
 
 /// A motion command in the supervisor's terms: the command moves the joints from `q_from`
@@ -85,6 +91,9 @@ struct ServoReference {
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Motion {
     servo: Option<(f64, f64)>,
+    /// The period the command covers [s]: one cycle, or for a servo step the controller time
+    /// since the previous servo command (missed cycles), up to `MAX_COMMAND_PERIOD_CYCLES`.
+    dt_s: f64,
     acc_rad_s2: f64,
     q_from: Joints,
     v: Joints,
@@ -397,7 +406,7 @@ impl<R: Robot> Supervisor<R> {
         let value = Violation::Malformed {
             input: MalformedInput::CommandValue,
         };
-        let dt = self.config.cycle.seconds();
+        let cycle = self.config.cycle.seconds();
         match *cmd {
             JointCommand::Stop { .. } => Ok(None),
             JointCommand::Servo {
@@ -415,13 +424,22 @@ impl<R: Robot> Supervisor<R> {
                         input: MalformedInput::ServoParameter,
                     });
                 }
-                let (q_from, v_prev) = match self.servo_ref {
-                    Some(r) => (r.q, r.v),
-                    None => (self.state.target_q, self.state.target_qd),
+                let (q_from, v_prev, dt) = match self.servo_ref {
+                    Some(r) => {
+                        let elapsed = self.state.timestamp_s - r.timestamp_s;
+                        let dt = if elapsed.is_finite() {
+                            elapsed.clamp(cycle, MAX_COMMAND_PERIOD_CYCLES * cycle)
+                        } else {
+                            cycle
+                        };
+                        (r.q, r.v, dt)
+                    }
+                    None => (self.state.target_q, self.state.target_qd, cycle),
                 };
                 let v = map2(&q, &q_from, |a, b| (a - b) / dt);
                 Ok(Some(Motion {
                     servo: Some((lookahead_s, gain)),
+                    dt_s: dt,
                     acc_rad_s2: self.config.joint_rates.max_acc_rad_s2(),
                     q_from,
                     v,
@@ -434,6 +452,7 @@ impl<R: Robot> Supervisor<R> {
                 }
                 Ok(Some(Motion {
                     servo: None,
+                    dt_s: cycle,
                     acc_rad_s2: acc,
                     q_from: self.state.actual_q,
                     v: qd,
@@ -451,7 +470,7 @@ impl<R: Robot> Supervisor<R> {
         world: &WorldView,
         caps: &Caps,
     ) -> std::result::Result<(f64, Option<Violation>, JointCommand), Violation> {
-        let dt = self.config.cycle.seconds();
+        let dt = motion.dt_s;
         let a_max = self.config.joint_rates.max_acc_rad_s2();
         let (cap_scale, cap_reason) = self.speed_cap_scale(motion, caps);
         let (scale, mut reason) = match motion.servo {
@@ -476,7 +495,11 @@ impl<R: Robot> Supervisor<R> {
         self.check_separation(&q_stop, &v, motion, world)?;
         let command = match motion.servo {
             Some((lookahead_s, gain)) => {
-                self.servo_ref = Some(ServoReference { q: q_next, v });
+                self.servo_ref = Some(ServoReference {
+                    q: q_next,
+                    v,
+                    timestamp_s: self.state.timestamp_s,
+                });
                 JointCommand::Servo {
                     q: q_next,
                     lookahead_s,

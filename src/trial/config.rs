@@ -107,6 +107,12 @@ impl FrameConfig {
         [c * dx + s * dy, -s * dx + c * dy, dz]
     }
 
+    /// A workspace-frame direction [-] in the base frame (rotation only).
+    pub(crate) fn direction_to_base(self, d: [f64; 3]) -> [f64; 3] {
+        let (s, c) = self.robot_base_yaw_deg.to_radians().sin_cos();
+        [c * d[0] + s * d[1], -s * d[0] + c * d[1], d[2]]
+    }
+
     /// A base-frame point [m] in the workspace frame [m].
     pub(crate) fn to_workspace(self, p: [f64; 3]) -> [f64; 3] {
         let o = self.robot_base_origin_m;

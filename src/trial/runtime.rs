@@ -13,13 +13,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use adapt::controller::{
-    Controller, ControllerConfig, HumanPoints, MotionAdaptation, RawHandoverFile, SmoothnessScale,
+    Controller, ControllerConfig, MotionAdaptation, OperatorView, RawHandoverFile, SmoothnessScale,
     SpeedScale,
 };
 use adapt::task::{Phase, TaskEventKind};
 use anyhow::Context as _;
 use assess::{AreaRole, AssessConfig, Assessor, CueFrame, RobotContext, Workspace};
 use policies::{Adaptation, PolicyKind, RuleTable, TaskContext, TaskPhase};
+use robot_io::geometry::{HumanBody, Torso};
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Robot, RobotState};
 use safety::{Supervisor, SupervisorConfig, Verdict, Violation, WorldView};
@@ -714,7 +715,7 @@ fn drive<R: TrialRobot>(
     let mut cmd = JointCommand::Stop { decel: 3.0 };
     let mut frame = CueFrame::empty(0.0);
     let mut motion = MotionAdaptation::default();
-    let mut humans = HumanPoints::default();
+    let mut humans = HumanBody::default();
     let mut world = WorldView::clear(0.0);
     let mut next_cue: u64 = 0;
     let mut last_cue_t = 0.0;
@@ -953,6 +954,12 @@ fn drive<R: TrialRobot>(
                 humans.head_m = frame.head.as_ref().map(|h| to_base(&h.position));
                 humans.left_hand_m = frame.hands[0].as_ref().map(|h| to_base(&h.position));
                 humans.right_hand_m = frame.hands[1].as_ref().map(|h| to_base(&h.position));
+                humans.torso = frame.body.as_ref().map(|b| Torso {
+                    shoulder_mid_m: to_base(&b.position),
+                    normal: cfg
+                        .frame
+                        .direction_to_base([b.facing.x, b.facing.y, b.facing.z]),
+                });
                 // A held recorded or camera frame is as old as its (mapped) time.
                 last_cue_t = cue_t;
                 live.t_s = tc;
@@ -990,7 +997,11 @@ fn drive<R: TrialRobot>(
             }
 
             // --- 500 Hz: controller → supervisor → robot ---
-            controller.step(t, &state, &motion, &humans, &mut cmd);
+            let view = OperatorView {
+                body: humans,
+                perception_age_s: (t - last_cue_t).max(0.0),
+            };
+            controller.step(t, &state, &motion, &view, &mut cmd);
             for ev in controller.events() {
                 match ev.kind {
                     TaskEventKind::PhaseChanged { to, .. } => {
@@ -1272,7 +1283,7 @@ fn stop_robot<R: Robot>(
 /// robot's control points (TCP, wrist, elbow at the measured joints) [m]; `None` when no human
 /// point is tracked.
 fn min_human_distance_m(
-    humans: &HumanPoints,
+    humans: &HumanBody,
     points: &robot_io::kinematics::ControlPoints,
 ) -> Option<f64> {
     [humans.head_m, humans.left_hand_m, humans.right_hand_m]
