@@ -63,7 +63,7 @@ pub(crate) struct LinkConfig {
 impl Default for LinkConfig {
     fn default() -> Self {
         Self {
-            lost_after_s: 0.5,
+            lost_after_s: 1.0,
             resume: false,
             resume_within_s: 10.0,
         }

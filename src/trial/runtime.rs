@@ -840,15 +840,19 @@ fn drive<R: TrialRobot>(
                         log.event(prev_t + CYCLE_S, &TrialEvent::Link { up: true })?;
                     }
                     let t_robot = state.timestamp_s - *t0.get_or_insert(state.timestamp_s);
-                    t = if fresh && (k == 0 || t_robot > prev_t) {
+                    t = if !fresh {
+                        // A missed sample: this cycle runs on the held state at the predicted
+                        // time; the supervisor stops the robot after 3 of them (SAF-REQ-009).
+                        prev_t + CYCLE_S
+                    } else if k == 0 || t_robot > prev_t {
                         t_robot
-                    } else if fresh {
+                    } else if t_robot < prev_t - CLOCK_RESTART_S {
                         // The robot's clock went back (a restarted controller): re-base.
                         t0 = Some(state.timestamp_s - (prev_t + CYCLE_S));
                         prev_t + CYCLE_S
                     } else {
-                        // A missed sample: this cycle runs on the held state at the predicted
-                        // time; the supervisor stops the robot after 3 of them (SAF-REQ-009).
+                        // Behind the predicted time of missed cycles: keep time monotonic
+                        // until the robot's clock catches up.
                         prev_t + CYCLE_S
                     };
                     if t >= cfg.max_duration_s {
@@ -1192,6 +1196,11 @@ fn drive<R: TrialRobot>(
     .into())
 }
 
+/// A robot clock this far behind trial time [s] was restarted (a new controller): trial time
+/// is re-based on it. Less is the lead of predicted (missed) cycles, which the robot's clock
+/// catches up.
+const CLOCK_RESTART_S: f64 = 1.0;
+
 /// Joint speed [rad/s] under which the arm counts as at rest (to resume after a link loss).
 const REST_RAD_S: f64 = 0.01;
 
@@ -1337,6 +1346,17 @@ pub(crate) fn progress_bar(show: bool) -> indicatif::ProgressBar {
 
 /// Shows the live values (every 30th call: once per simulated second at 30 Hz).
 pub(crate) fn update_bar(bar: &indicatif::ProgressBar, l: &Live) {
+    if let Some(down) = l.link_down_s
+        && !bar.is_hidden()
+    {
+        bar.set_message(format!(
+            "robot link lost {down:.1} s ago at t = {:.1} s: robot stopped, waiting for it to \
+             come back",
+            l.t_s
+        ));
+        bar.tick();
+        return;
+    }
     if bar.is_hidden() || !((l.t_s * 30.0).round() as u64).is_multiple_of(30) {
         return;
     }
@@ -1346,6 +1366,11 @@ pub(crate) fn update_bar(bar: &indicatif::ProgressBar, l: &Live) {
     ));
     bar.tick();
 }
+
+/// Held by every test that runs a trial on the in-process emulator: they run one at a time
+/// (several real-time emulators at once on two cores starve each other's control loop).
+#[cfg(test)]
+pub(crate) static EMULATOR_TESTS: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// Asserts every file a trial leaves (ARCHITECTURE.md, "Files a trial leaves").
 #[cfg(test)]
@@ -1417,6 +1442,7 @@ mod tests {
 
     #[test]
     fn emulator_trial_runs_over_loopback_rtde_and_writes_every_file() {
+        let _one_at_a_time = EMULATOR_TESTS.lock().unwrap_or_else(|e| e.into_inner());
         let dir = tempfile::tempdir().unwrap();
         let stop = AtomicBool::new(false);
         let out = run_trial_with(

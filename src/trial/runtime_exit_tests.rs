@@ -64,6 +64,7 @@ fn run_on_emulator(
     stop: &AtomicBool,
     hook: &mut dyn FnMut(&Emulator, &Live),
 ) -> anyhow::Result<PathBuf> {
+    let _one_at_a_time = EMULATOR_TESTS.lock().unwrap_or_else(|e| e.into_inner());
     let choice = RobotChoice::Emulator { speedup: 10 };
     let setup = load_setup(spec, &choice, &CueSource::Simulated, out)?;
     let (robot, guard) = super::super::backend::start_emulator(setup.ctl_cfg.task.home_q_rad, 10)?;

@@ -271,7 +271,7 @@ fn sigstop_without_resume_ends_as_link_lost_with_exit_code_3() {
     let mut trial = Trial::start(&emu, tmp.path(), false);
     trial.wait_until_running();
     emu.signal("-STOP");
-    // No resume: the trial ends while the emulator is still stopped (0.5 s without state).
+    // No resume: the trial ends while the emulator is still stopped (1 s without state).
     let (status, stdout, stderr) = trial.wait();
     emu.signal("-CONT");
     assert_eq!(status.code(), Some(3), "{stderr}");
