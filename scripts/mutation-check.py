@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
 """Mutation check of the assessment worked examples (issue 2 acceptance).
 
-Applies one mutation at a time to a MODEL.md constant or formula in assess/, runs the worked
-examples and the assess unit tests, reports whether some test failed (CAUGHT) and restores the
-source. Run from the repository root: python3 scripts/mutation-check.py (about 10 minutes).
+Applies one mutation at a time to a constant or formula of the model (assess::spec) in
+assess/, runs the worked examples and the assess unit tests, reports whether some test failed
+(CAUGHT) and restores the source. Run from the repository root:
+python3 scripts/mutation-check.py (about 10 minutes).
 Not part of CI: it rebuilds the crate once per mutation.
 """
 import re

@@ -56,7 +56,7 @@ pub(crate) struct AssessArgs {
     /// Workspace calibration TOML.
     #[arg(long)]
     workspace: PathBuf,
-    /// Model configuration TOML (default: MODEL.md's values).
+    /// Model configuration TOML (default: the values of the spec in the `assess` crate docs).
     #[arg(long)]
     config: Option<PathBuf>,
     /// Output folder; created, and refused if it exists and is not empty (see --force).

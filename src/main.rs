@@ -42,7 +42,7 @@ enum Command {
 
 #[derive(Debug, clap::Args)]
 struct ConfigArgs {
-    /// Print the assessment model's default configuration (MODEL.md) as TOML.
+    /// Print the assessment model's default configuration (the `assess` crate's spec) as TOML.
     #[arg(long)]
     print_default: bool,
 }

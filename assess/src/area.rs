@@ -1,4 +1,5 @@
-//! Calibrated workspace areas (MODEL.md, "Calibrated areas") and their TOML calibration file.
+//! Calibrated workspace areas ([`spec`](crate::spec), "Calibrated areas") and their TOML
+//! calibration file.
 //!
 //! ```toml
 //! # Optional: the workspace diagonal D_ws [m]; default: the diagonal of the bounding box of all areas.

@@ -54,7 +54,7 @@ impl HandTrack {
     }
 }
 
-/// The attention–action assessment model (MODEL.md §1–8) for one operator.
+/// The attention–action assessment model ([`spec`](crate::spec) §1–8) for one operator.
 ///
 /// [`Assessor::new`] allocates everything; [`Assessor::update`] is O(1) in the trial length and
 /// allocates nothing. A frame whose time is not finite or does not increase is rejected: it

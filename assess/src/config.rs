@@ -1,8 +1,8 @@
-//! Model parameters (every constant of MODEL.md), with the spec's defaults, loaded from TOML and
-//! validated.
+//! Model parameters (every constant of the [`spec`](crate::spec)), with its defaults, loaded from
+//! TOML and validated.
 //!
 //! Every key is optional; an absent key keeps its default. Unknown keys are rejected.
-//! `AssessConfig::default()` is the MODEL.md configuration. `config/assess.toml` lists every key.
+//! `AssessConfig::default()` is the spec's configuration. `config/assess.toml` lists every key.
 
 use std::path::Path;
 
@@ -299,7 +299,7 @@ impl Default for DominantConfig {
     }
 }
 
-/// All parameters of the assessment model. `Default` is MODEL.md.
+/// All parameters of the assessment model. `Default` is the [`spec`](crate::spec)'s values.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AssessConfig {

@@ -1,4 +1,4 @@
-//! Per-frame cues: the model's input (MODEL.md, "Inputs per frame").
+//! Per-frame cues: the model's input ([`spec`](crate::spec), "Inputs per frame").
 
 use crate::Vec3;
 
@@ -55,7 +55,8 @@ impl Hand {
     }
 }
 
-/// Robot context of a frame, from the robot side of the trial (MODEL.md, "Robot context").
+/// Robot context of a frame, from the robot side of the trial ([`spec`](crate::spec), "Robot
+/// context").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct RobotContext {
     /// C(t): a robot-collaboration period is active (approaching, presenting or waiting at the handover).

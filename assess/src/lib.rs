@@ -1,7 +1,8 @@
 //! # assess: vision-based cognitive-workload assessment for human–robot collaborative assembly
 //!
-//! This crate implements the attention–action model of the seed paper, as restated in
-//! `MODEL.md` (§ numbers below refer to it). Per frame:
+//! This crate implements the attention–action model of Xiong et al.'s vision-based cognitive
+//! workload paper (2026), as restated in [`spec`]: every formula, constant and decision where the
+//! paper is silent (§ numbers in these docs refer to it). Per frame:
 //!
 //! 1. each cue (head, upper body, hand) gives evidence S_i^c for every calibrated [`Area`];
 //! 2. reliability-weighted fusion gives S_i and the raw state F_raw (τ);
@@ -13,8 +14,9 @@
 //! 8. the composite HRC-CWL, its category and the dominant indicator.
 //!
 //! The main types are [`Workspace`] (the calibrated areas), [`AssessConfig`] (every constant,
-//! defaulting to MODEL.md), [`CueFrame`] (one frame of input), [`Assessor`] and [`Assessment`].
-//! [`Assessor::update`] is O(1) per frame and allocates nothing after construction.
+//! defaulting to the [`spec`]'s values), [`CueFrame`] (one frame of input), [`Assessor`] and
+//! [`Assessment`]. [`Assessor::update`] is O(1) per frame and allocates nothing after
+//! construction.
 //!
 //! ```
 //! use assess::{Assessor, AssessConfig, CueFrame, HeadCue, Vec3, Workspace};
@@ -60,6 +62,8 @@ pub mod evidence;
 pub mod filter;
 mod hesitation;
 pub mod io;
+#[doc = include_str!("spec.md")]
+pub mod spec {}
 #[cfg(feature = "vision")]
 pub mod vision;
 mod window;

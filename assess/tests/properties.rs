@@ -346,7 +346,7 @@ fn behaviour(segs: &[Segment], t: f64) -> CueFrame {
 
 fn run_at(segs: &[Segment], fps: usize) -> Assessment {
     let mut cfg = AssessConfig::default();
-    // M spans the same 0.5 s at both rates (MODEL.md: "M = 15 frames (0.5 s at 30 fps)").
+    // M spans the same 0.5 s at both rates (`assess::spec` §3: "M = 15 frames, 0.5 s at 30 fps").
     cfg.confirmation.window_frames = fps / 2;
     let mut a = Assessor::new(workspace(), cfg).unwrap();
     let total: f64 = segs.iter().map(|s| s.duration).sum();

@@ -1,7 +1,8 @@
-//! Worked examples: one or more per MODEL.md section, each checking numbers computed by hand.
+//! Worked examples: one or more per section of the spec (`assess::spec`), each checking numbers
+//! computed by hand.
 //!
 //! The hand arithmetic is written out in each test's comments. Every expected value below was
-//! computed on paper (to 6 significant digits) from the MODEL.md formulas, not by running the
+//! computed on paper (to 6 significant digits) from the spec's formulas, not by running the
 //! code. Changing any constant or formula of the model makes at least one of these fail.
 //!
 //! The test workspace (all tests): the operator stands at the origin; four 0.2 m cubes are

@@ -2,8 +2,9 @@
 //!
 //! The assessor (`assess`) streams an [`assess::Assessment`] per camera frame; its `dominant`
 //! field names the indicator that currently drives the operator's workload above their
-//! baseline (MODEL.md §8). A [`Policy`] turns it, with a [`TaskContext`] from the handover task,
-//! into an [`Adaptation`]: plain parameters that the binary maps onto `adapt`'s inputs.
+//! baseline ([`assess::spec`] §8). A [`Policy`] turns it, with a [`TaskContext`] from the
+//! handover task, into an [`Adaptation`]: plain parameters that the binary maps onto `adapt`'s
+//! inputs.
 //!
 //! - [`Adaptation`]: speed, acceleration and jerk [`Scale`]s in (0, 1], [`HandoverTiming`]
 //!   (start delay, minimum approach duration, attention and area gating, assembly deferral), the

@@ -1,4 +1,4 @@
-//! Statistics for policy A/B experiments and the paper's validation (MODEL.md §9, issue 5).
+//! Statistics for policy A/B experiments and the paper's validation (`assess::spec` §9, issue 5).
 //!
 //! Pure `f64`, no dependencies. Every test is two-sided and matches scipy 1.17 (`scipy.stats`)
 //! where scipy has it; `scripts/stats_reference.py` writes scipy's answers on seeded data into
@@ -538,7 +538,7 @@ pub(crate) struct SpearmanResult {
     pub(crate) n: usize,
 }
 
-/// Spearman's rank correlation of `x` and `y` with a two-sided p-value (MODEL.md §9: per
+/// Spearman's rank correlation of `x` and `y` with a two-sided p-value (`assess::spec` §9: per
 /// participant; the method is part of the result so reports can state it).
 pub(crate) fn spearman(
     x: &[f64],
@@ -658,7 +658,7 @@ pub(crate) fn raw_tlx(ratings: [f64; 6]) -> Result<f64, StatsError> {
 mod tests {
     use super::*;
 
-    /// MODEL.md §9: the paper's χ²(2) figures and their p-values (3 decimals).
+    /// `assess::spec` §9: the paper's χ²(2) figures and their p-values (3 decimals).
     #[test]
     fn paper_chi2_figures() {
         for (chi2, p) in [(6.20, 0.045), (6.70, 0.035), (6.82, 0.033)] {

@@ -14,7 +14,7 @@
 //! its output on the bundled recording.
 //!
 //! - **Up is +z; positions are metres.** Median heights: taker head 1.483 m, chest 1.145 m,
-//!   hip 0.904 m; giver head 1.441 m, chest 1.120 m. This is the workspace frame of MODEL.md as
+//!   hip 0.904 m; giver head 1.441 m, chest 1.120 m. This is the workspace frame of the spec as
 //!   is: no axis permutation is applied. The taker stands at x ≈ +0.62, the giver at
 //!   x ≈ −0.55, and the handover happens between them at x ≈ 0.
 //! - **The scalar w is `q3`: the order is `x,y,z,w`, and q maps body → world**

@@ -18,8 +18,8 @@
 //! - **Confidence** per cue: landmark score × share of valid depth × temporal consistency
 //!   (1 while the cue moves slower than `max_speed_m_s`, falling as v_max / v beyond).
 //! - **Smoothing**: a One-Euro filter on head and body position and facing. Hand positions are
-//!   *not* filtered here, because the assessor filters them itself (MODEL.md §7) and the hand
-//!   speed it computes must not be filtered twice.
+//!   *not* filtered here, because the assessor filters them itself ([`spec`](crate::spec) §7) and
+//!   the hand speed it computes must not be filtered twice.
 //!
 //! Without depth (a webcam), body and hand depth come from the head's PnP distance (or from an
 //! assumed shoulder width), so positions are rough: the frame is flagged
