@@ -3,17 +3,22 @@
 //! This crate holds:
 //! - UR5e inverse kinematics (8 branches, nearest to the current joint vector) on top of the
 //!   forward kinematics in `robot_io::kinematics`;
-//! - jerk-limited online trajectory generation with `rsruckig`;
-//! - speed and separation monitoring (ISO/TS 15066) and per-cycle QP speed scaling with `clarabel`;
+//! - jerk-limited online trajectory generation with `rsruckig` ([`otg`]), and the jerk-limited
+//!   path the controller runs at a jerk-limited time scale ([`path`]);
+//! - the planner's speed envelope near the operator ([`envelope`]): the supervisor's caps and
+//!   ISO/TS 15066 separation on `robot_io`'s capsule geometry, as the largest admissible scale;
 //! - the handover task state machine, which also reports the robot context C(t), G(t);
-//! - `Controller::step`, the 500 Hz cycle, which allocates nothing.
+//! - `Controller::step`, the 500 Hz cycle, which allocates nothing;
+//! - ISO/TS 15066 SSM/PFL speed limits ([`ssm`]) and a per-cycle QP speed scaler ([`qp`], with
+//!   `clarabel` as its cross-check): the controller's cycle used them before the time scaling
+//!   (issue 10) and uses neither now.
 //!
 //! It depends on `robot-io` types only and never sees `assess` types.
 //!
 //! Main types: [`controller::Controller`] (with [`controller::MotionAdaptation`] and
-//! [`controller::HumanPoints`] as inputs), [`task::HandoverTask`], [`otg::Otg`] with
-//! [`otg::MotionLimits`], [`qp::SpeedScaler`] returning a [`qp::QpStatus`] every cycle,
-//! [`ssm::SsmConfig`], and [`ik::nearest`].
+//! [`controller::OperatorView`] as inputs), [`task::HandoverTask`], [`path::Path`] with
+//! [`path::TimeScale`], [`envelope::Envelope`] with [`envelope::SafetyEnvelope`], [`otg::Otg`]
+//! with [`otg::MotionLimits`], and [`ik::nearest`].
 //!
 //! # Example
 //! Inverse kinematics back to a joint vector, then a jerk-limited move to it at half speed:

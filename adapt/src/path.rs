@@ -23,7 +23,7 @@
 //! ```text
 //! |q̇| ≤ V,   |q̈| ≤ ṡ_max·Q1 + A_p,   |q⃛| ≤ s̈_max·Q1 + 3 ṡ_max·Q2 + J_p
 //! ```
-//! with `Q1 = max |q'|` and `Q2 = max |q''|` over the planned path ([`PathLimits`] picks
+//! with `Q1 = max |q'|` and `Q2 = max |q''|` over the planned path ([`scale_limits_for`] picks
 //! `ṡ_max`, `s̈_max` from budgets so that these stay within the planner's own limits).
 //!
 //! # Example

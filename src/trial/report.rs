@@ -39,7 +39,7 @@ use assess_report::plot;
 /// `hrc-adapt assess`.
 pub(crate) use crate::report as assess_report;
 
-/// What [`write`] left.
+/// What [`write()`] left.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct ReportFiles {
     /// `report.html`.

@@ -20,7 +20,7 @@
 //! - Cells may be padded with spaces and enclosed in double quotes; they never contain commas.
 //!   Lines may end in `\n` or `\r\n`; a leading UTF-8 byte-order mark is skipped.
 //!
-//! [`write`] writes every column, with the shortest decimal form of each number that reads back
+//! [`write()`] writes every column, with the shortest decimal form of each number that reads back
 //! to the same `f64` (Rust's `{:?}`), so a written file reads back bit for bit.
 //!
 //! Errors name the file, the 1-based line and column (field number) and the offending cell, e.g.
@@ -34,7 +34,7 @@ use crate::Vec3;
 use crate::cue::{BodyCue, CueFrame, HandCue, HeadCue, RobotContext};
 use crate::error::{AssessError, Result};
 
-/// Every column of the format, in the order [`write`] writes them.
+/// Every column of the format, in the order [`write()`] writes them.
 pub const COLUMNS: [&str; 25] = [
     "t",
     "head_x",
@@ -237,7 +237,7 @@ pub fn write(path: &Path, frames: &[CueFrame]) -> Result<()> {
     out.flush().map_err(io_err)
 }
 
-/// Writes frames as a cue CSV document to any writer (see [`write`]). I/O errors are reported
+/// Writes frames as a cue CSV document to any writer (see [`write()`]). I/O errors are reported
 /// with `<writer>` as the path.
 pub fn write_to<W: Write>(mut writer: W, frames: &[CueFrame]) -> Result<()> {
     check_frames(frames)?;

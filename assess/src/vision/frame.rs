@@ -28,7 +28,7 @@ impl RgbImage {
     }
 
     /// Reads an image file (any format OpenCV decodes: PNG, JPEG, ...) as RGB. A missing,
-    /// empty, truncated or undecodable file is an [`AssessError::Source`] naming it.
+    /// empty, truncated or undecodable file is an [`AssessError::Source`](crate::AssessError::Source) naming it.
     pub fn read(path: &std::path::Path) -> crate::Result<Self> {
         use opencv::core::Mat;
         use opencv::imgcodecs;
