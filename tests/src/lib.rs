@@ -1,7 +1,10 @@
-//! # hrc-adapt-tests: cross-crate, real-data and hardware-in-the-loop tests
+//! # hrc-adapt-tests: shared test helpers, and the home of cross-crate tests
 //!
-//! The tests live in `tests/tests/`. This library holds only shared helpers, such as locating the
-//! data bundled in the repository's `data/` folder.
+//! This library holds only helpers that the crates' own tests share: locating the data bundled
+//! in the repository's `data/` folder and its `config/` folder, and a counting allocator. Each
+//! crate's own tests live in that crate (`<crate>/tests/`); cross-crate closed-loop tests belong
+//! in `tests/tests/`. There are none there yet: the closed-loop trial tests need the trial
+//! runtime, which is still in the `hrc-adapt` binary (ARCHITECTURE.md, "Where the tests live").
 
 use std::path::PathBuf;
 
