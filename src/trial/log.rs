@@ -44,9 +44,10 @@
 //! trial (one thread, mock clock), where draining happens between control cycles. Should the
 //! ring fill before a camera-rate call drains it, the control-rate call drains it itself (counted
 //! in [`TrialFiles::synchronous_drains`]). For a real-robot runtime with its own control thread,
-//! the plan in ARCHITECTURE.md ("Log writer: drains a preallocated ring from the control
-//! thread") is to move the drain behind a single-producer ring of the same records; the record
-//! type and the drain are written so that only the hand-off changes.
+//! the plan (ARCHITECTURE.md, "Not yet as designed": a log-writer thread draining a
+//! preallocated ring from the control thread) is to move the drain behind a single-producer ring
+//! of the same records; the record type and the drain are written so that only the hand-off
+//! changes.
 
 #[path = "log_mcap.rs"]
 pub(crate) mod mcap_out;
