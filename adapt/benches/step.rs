@@ -10,9 +10,9 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use adapt::controller::{Controller, ControllerConfig, MotionAdaptation, OperatorView};
-use robot_io::geometry::HumanBody;
 use adapt::task::Phase;
 use criterion::{Criterion, criterion_group, criterion_main};
+use robot_io::geometry::HumanBody;
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Robot, RobotState};
 

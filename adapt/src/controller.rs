@@ -78,8 +78,12 @@ use crate::envelope::{
     Binding, Envelope, PlanningMargins, RawPlanningMargins, SafetyEnvelope, flange_speed_m_s,
 };
 use crate::otg::{MotionLimits, PlanStatus};
-use crate::path::{PLAN_SAMPLES, Path, PathSample, PathState, ScaleLimits, TimeScale, scale_limits_for};
-use crate::task::{EventBuffer, HandoverTask, Phase, RawTaskConfig, TaskConfig, TaskEvent, TaskInput};
+use crate::path::{
+    PLAN_SAMPLES, Path, PathSample, PathState, ScaleLimits, TimeScale, scale_limits_for,
+};
+use crate::task::{
+    EventBuffer, HandoverTask, Phase, RawTaskConfig, TaskConfig, TaskEvent, TaskInput,
+};
 use crate::{AdaptError, Result};
 
 /// Capacity of the per-step event buffer [events]; one step emits at most three.
@@ -98,6 +102,10 @@ macro_rules! unit_scale {
         impl $t {
             /// No scaling (1).
             pub const ONE: $t = $t(1.0);
+
+            /// The most cautious scale a caller falls back to when a mapped value is invalid
+            /// (fail closed) [-]: 0.1.
+            pub const CAUTIOUS: $t = $t(0.1);
 
             /// A scale `x` [-].
             ///
@@ -399,6 +407,8 @@ const PATH_JERK_SHARE: f64 = 0.6;
 const SUPERVISOR_ACC_SHARE: f64 = 0.95;
 /// Iterations that shrink the path's velocity limit until its TCP speed meets the cap.
 const TCP_PLAN_ITERATIONS: usize = 4;
+/// A reduction of the time scale's target holds this long before the target may rise [s].
+const TARGET_HOLD_S: f64 = 0.6;
 /// How long the robot must stand settled at a target before the motion counts as finished
 /// [s].
 const SETTLE_DWELL_S: f64 = 0.25;
@@ -504,8 +514,16 @@ impl HumanTracker {
         let sep = envelope.separation();
         let [head, left, right, torso] = &mut self.points;
         head.update(body.head_m, now, sep.human_speed_m_s(BodyPart::Head));
-        left.update(body.left_hand_m, now, sep.human_speed_m_s(BodyPart::LeftHand));
-        right.update(body.right_hand_m, now, sep.human_speed_m_s(BodyPart::RightHand));
+        left.update(
+            body.left_hand_m,
+            now,
+            sep.human_speed_m_s(BodyPart::LeftHand),
+        );
+        right.update(
+            body.right_hand_m,
+            now,
+            sep.human_speed_m_s(BodyPart::RightHand),
+        );
         torso.update(
             body.torso.map(|t| t.shoulder_mid_m),
             now,
@@ -569,6 +587,8 @@ pub struct Controller {
     last_now_s: Option<f64>,
     /// Since when the robot stands settled at its target [s].
     settled_since_s: Option<f64>,
+    /// The time scale's target held since a reduction: (target [-], since [s]).
+    held_target: Option<(f64, f64)>,
     report: ScaleReport,
     stats: ControllerStats,
 }
@@ -607,6 +627,7 @@ impl Controller {
             last_plan: PlanStatus::Finished,
             last_now_s: None,
             settled_since_s: None,
+            held_target: None,
             report: ScaleReport {
                 scale: 1.0,
                 target: 1.0,
@@ -743,7 +764,9 @@ impl Controller {
                 } else {
                     last + cycle
                 };
-                let n = ((now - last) / cycle).round().clamp(1.0, MAX_CATCH_UP_CYCLES);
+                let n = ((now - last) / cycle)
+                    .round()
+                    .clamp(1.0, MAX_CATCH_UP_CYCLES);
                 (now, n)
             }
         };
@@ -816,10 +839,9 @@ impl Controller {
         if wanted != self.target {
             self.target = wanted;
             let min = adaptation.min_approach_duration.as_secs_f64();
-            self.arrive_not_before_s = (self.task.phase() == Phase::Approach
-                && min.is_finite()
-                && min > 0.0)
-                .then_some(now + min);
+            self.arrive_not_before_s =
+                (self.task.phase() == Phase::Approach && min.is_finite() && min > 0.0)
+                    .then_some(now + min);
             replan = true;
         }
         // A path that starts at rest may start at any scale (the executed velocity s·q' and
@@ -847,12 +869,26 @@ impl Controller {
                 velocity: self.sample.velocity,
                 acceleration: self.sample.acceleration,
             };
-            from_rest = start.velocity.iter().chain(&start.acceleration).all(|x| *x == 0.0);
+            from_rest = start
+                .velocity
+                .iter()
+                .chain(&start.acceleration)
+                .all(|x| *x == 0.0);
             self.plan_from(&start, now);
         }
 
         // 3. Time scaling: the largest target the lookahead allows, then one jerk-limited step.
-        let s_target = self.scale_target(humans, view.perception_age_s, collaborating);
+        let raw_target = self.scale_target(humans, view.perception_age_s, collaborating);
+        // Hold a reduction for TARGET_HOLD_S before the target may rise again, so noise in the
+        // operator's tracked points never makes the speed pump (stop-and-go); a lower target
+        // always applies at once.
+        let s_target = match self.held_target {
+            Some((held, since)) if raw_target >= held && now - since < TARGET_HOLD_S => held,
+            _ => {
+                self.held_target = Some((raw_target, now));
+                raw_target
+            }
+        };
         if from_rest {
             self.scale.reset(0.0, s_target);
         }
@@ -1014,7 +1050,9 @@ impl Controller {
             }
             ok = true;
             let peak = self.peak_tcp_speed();
-            if !(peak > tcp_cap) {
+            // A NaN peak (non-finite kinematics) also ends the loop: the plan stands and the
+            // time scale's own TCP check applies.
+            if peak.partial_cmp(&tcp_cap) != Some(std::cmp::Ordering::Greater) {
                 break;
             }
             // Shrink the velocity limits by the overshoot (with a 5 % margin) and plan again.
@@ -1064,7 +1102,12 @@ impl Controller {
 
     /// The time scale's target: the largest `s` from which every lookahead sample's admissible
     /// scale can still be reached in time (`s_k + reachable drop within h_k`), at most 1.
-    fn scale_target(&mut self, humans: &HumanBody, perception_age_s: f64, collaborating: bool) -> f64 {
+    fn scale_target(
+        &mut self,
+        humans: &HumanBody,
+        perception_age_s: f64,
+        collaborating: bool,
+    ) -> f64 {
         let age = if perception_age_s.is_finite() {
             perception_age_s.max(0.0)
         } else {

@@ -216,7 +216,8 @@ pub struct RawPlanningMargins {
     pub distance_margin_m: f64,
     /// Relative allowance for the measured speed exceeding the commanded one [-], ≥ 0.
     pub measured_speed_allowance: f64,
-    /// Added to the perception age (the next frame may be this late) [s], ≥ 0.
+    /// The planner takes the perception age as at least this (a frame period and latency)
+    /// [s], ≥ 0.
     pub perception_age_margin_s: f64,
     /// Upper bound of the time-scale rate ṡ_max [1/s], > 0.
     pub max_scale_rate_per_s: f64,
@@ -231,8 +232,8 @@ pub struct PlanningMargins {
 }
 
 impl Default for PlanningMargins {
-    /// 0.9 of every cap, 0.05 m beyond S_p, 10 % measured-speed allowance, 0.05 s of extra
-    /// perception age, ṡ_max ≤ 4 /s, s̈_max ≤ 40 /s².
+    /// 0.9 of every cap, 0.05 m beyond S_p, 10 % measured-speed allowance, a perception age
+    /// of at least 0.05 s, ṡ_max ≤ 4 /s, s̈_max ≤ 40 /s².
     fn default() -> Self {
         PlanningMargins {
             raw: RawPlanningMargins {
@@ -264,7 +265,10 @@ impl TryFrom<RawPlanningMargins> for PlanningMargins {
                 "planning.measured_speed_allowance",
                 raw.measured_speed_allowance,
             ),
-            ("planning.perception_age_margin_s", raw.perception_age_margin_s),
+            (
+                "planning.perception_age_margin_s",
+                raw.perception_age_margin_s,
+            ),
         ] {
             if !(v.is_finite() && (0.0..=10.0).contains(&v)) {
                 return Err(AdaptError::InvalidValue {
@@ -274,7 +278,10 @@ impl TryFrom<RawPlanningMargins> for PlanningMargins {
             }
         }
         positive("planning.max_scale_rate_per_s", raw.max_scale_rate_per_s)?;
-        positive("planning.max_scale_accel_per_s2", raw.max_scale_accel_per_s2)?;
+        positive(
+            "planning.max_scale_accel_per_s2",
+            raw.max_scale_accel_per_s2,
+        )?;
         Ok(PlanningMargins { raw })
     }
 }
@@ -418,7 +425,11 @@ impl Envelope {
             }
         };
         if w > 0.0 {
-            bind(m.speed_fraction * l.joint_speed_rad_s * k / w, Binding::JointSpeed, &mut best);
+            bind(
+                m.speed_fraction * l.joint_speed_rad_s * k / w,
+                Binding::JointSpeed,
+                &mut best,
+            );
         }
         if u > 0.0 {
             bind(
@@ -439,7 +450,10 @@ impl Envelope {
         l.arm.capsules(&q_stop, &mut self.stop_capsules);
         let now = closest_approaches(&self.capsules, body, &l.body);
         let stop = closest_approaches(&self.stop_capsules, body, &l.body);
-        let age = perception_age_s + m.perception_age_margin_s;
+        // The perception age grows by a frame period between frames and drops at each new one;
+        // planning with at least the margin keeps the admissible scale from following that
+        // saw-tooth (the supervisor uses the actual age, never above it in nominal operation).
+        let age = perception_age_s.max(m.perception_age_margin_s);
         let eps = 1.0 + m.measured_speed_allowance;
         for ((part, a), b) in BodyPart::ALL.iter().zip(&now).zip(&stop) {
             let d = match (a, b) {
@@ -516,7 +530,10 @@ mod tests {
         let b = flange_pose(&q2).translation.vector;
         let reference = (b - a).norm() / dt;
         let u = flange_speed_m_s(&q, &qd);
-        assert!((u - reference).abs() < 1e-5 * reference.max(1e-3), "{u} vs {reference}");
+        assert!(
+            (u - reference).abs() < 1e-5 * reference.max(1e-3),
+            "{u} vs {reference}"
+        );
         assert_eq!(flange_speed_m_s(&q, &[0.0; 6]), 0.0);
     }
 }

@@ -132,7 +132,11 @@ impl Path {
         let mut input = InputParameter::new(None);
         for i in 0..DOF {
             set(&mut input.max_velocity, i, limits.max_velocity().get(i));
-            set(&mut input.max_acceleration, i, limits.max_acceleration().get(i));
+            set(
+                &mut input.max_acceleration,
+                i,
+                limits.max_acceleration().get(i),
+            );
             set(&mut input.max_jerk, i, limits.max_jerk().get(i));
         }
         Path {
@@ -164,12 +168,24 @@ impl Path {
         for i in 0..DOF {
             set(&mut self.input.current_position, i, start.position.get(i));
             set(&mut self.input.current_velocity, i, start.velocity.get(i));
-            set(&mut self.input.current_acceleration, i, start.acceleration.get(i));
+            set(
+                &mut self.input.current_acceleration,
+                i,
+                start.acceleration.get(i),
+            );
             set(&mut self.input.target_position, i, target.get(i));
             set(&mut self.input.target_velocity, i, Some(&0.0));
             set(&mut self.input.target_acceleration, i, Some(&0.0));
-            set(&mut self.input.max_velocity, i, limits.max_velocity().get(i));
-            set(&mut self.input.max_acceleration, i, limits.max_acceleration().get(i));
+            set(
+                &mut self.input.max_velocity,
+                i,
+                limits.max_velocity().get(i),
+            );
+            set(
+                &mut self.input.max_acceleration,
+                i,
+                limits.max_acceleration().get(i),
+            );
             set(&mut self.input.max_jerk, i, limits.max_jerk().get(i));
         }
         self.input.minimum_duration = minimum_duration_s.filter(|d| d.is_finite() && *d > 0.0);
@@ -352,7 +368,11 @@ pub fn scale_limits_for(
         .min(max_rate);
     let accel = (jerk_budget / (2.0 * q1)).min(max_accel);
     // Budgets are positive by construction in the controller; guard anyway.
-    let rate = if rate.is_finite() && rate > 0.0 { rate } else { 1e-3 };
+    let rate = if rate.is_finite() && rate > 0.0 {
+        rate
+    } else {
+        1e-3
+    };
     let accel = if accel.is_finite() && accel > 0.0 {
         accel
     } else {
@@ -398,7 +418,11 @@ impl TimeScale {
     /// Restart at path time `tau` [s] with factor `s` [-] (clamped to [0, 1]) and `ṡ = 0`.
     pub fn reset(&mut self, tau: f64, s: f64) {
         self.tau = if tau.is_finite() { tau } else { 0.0 };
-        self.s = if s.is_finite() { s.clamp(0.0, 1.0) } else { 0.0 };
+        self.s = if s.is_finite() {
+            s.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         self.s_dot = 0.0;
     }
 
@@ -475,7 +499,7 @@ impl TimeScale {
             let s_dot = self.buf[2].get(0).copied().unwrap_or(0.0);
             if tau.is_finite() && s.is_finite() && s_dot.is_finite() {
                 self.tau = tau.max(self.tau);
-                if s < 0.0 || s > 1.0 {
+                if !(0.0..=1.0).contains(&s) {
                     // Numerical overshoot of the bounds: rest on the bound.
                     self.s = s.clamp(0.0, 1.0);
                     self.s_dot = 0.0;
@@ -577,7 +601,8 @@ mod tests {
         assert!(path.max_acceleration() <= std::f64::consts::PI + 1e-9);
         // A minimum duration stretches it.
         let fast = path.duration_s();
-        path.plan(&start, &target, &limits, Some(fast * 2.0)).unwrap();
+        path.plan(&start, &target, &limits, Some(fast * 2.0))
+            .unwrap();
         assert!((path.duration_s() - 2.0 * fast).abs() < 1e-6);
     }
 }

@@ -3,9 +3,9 @@
 //! (speed scaling active) and then reaches the presented TCP.
 
 use adapt::controller::{Controller, ControllerConfig, MotionAdaptation, OperatorView};
-use robot_io::geometry::HumanBody;
 use adapt::task::Phase;
 use hrc_adapt_tests::alloc_count::{CountingAllocator, allocations_in};
+use robot_io::geometry::HumanBody;
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Robot, RobotState};
 

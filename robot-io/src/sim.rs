@@ -683,22 +683,23 @@ impl SimRobot {
             let correction = (error * track / CYCLE_S).clamp(-correction_cap, correction_cap);
             let cap = l.max_speed * scale;
             let mut wanted = ((feedforward + correction) * scale).clamp(-cap, cap);
-            // No overshoot of the commanded target: the speed *relative to the target's own
-            // motion* toward it stays one from which the joint can stop at it (a target that
-            // moves smoothly with the joint never binds this; a step does).
-            let target_velocity = (t - j.servo_target) / CYCLE_S;
+            // No overshoot of a target that holds still (a step, or the end of a motion): the
+            // speed toward it stays one from which the joint can stop at it. A moving target
+            // (a trajectory streamed every cycle) is tracked by the feedforward instead.
+            let held = *t == j.servo_target;
             j.servo_target = *t;
-            let to_target = t - j.q;
-            // The discrete braking curve: from this speed, slowing by a·dt per cycle (with
-            // q += v·dt after each change) covers at most |to_target|.
-            let step = l.max_acc * CYCLE_S;
-            let approach_cap =
-                step * ((0.25 + 2.0 * to_target.abs() / (step * CYCLE_S)).sqrt() - 0.5);
-            let relative = wanted - target_velocity;
-            if to_target > 0.0 && relative > approach_cap {
-                wanted = target_velocity + approach_cap;
-            } else if to_target < 0.0 && relative < -approach_cap {
-                wanted = target_velocity - approach_cap;
+            if held {
+                let to_target = t - j.q;
+                // The discrete braking curve: from this speed, slowing by a·dt per cycle
+                // (with q += v·dt after each change) covers at most |to_target|.
+                let step = l.max_acc * CYCLE_S;
+                let approach_cap =
+                    step * ((0.25 + 2.0 * to_target.abs() / (step * CYCLE_S)).sqrt() - 0.5);
+                if to_target > 0.0 && wanted > approach_cap {
+                    wanted = approach_cap;
+                } else if to_target < 0.0 && wanted < -approach_cap {
+                    wanted = -approach_cap;
+                }
             }
             let wanted = wanted.clamp(-cap, cap);
             let dv = l.max_acc * CYCLE_S;
@@ -1023,7 +1024,13 @@ mod tests {
                 let acc = (s.actual_qd[j] - prev.actual_qd[j]) / CYCLE_S;
                 assert!(acc.abs() <= PI + 1e-6, "cycle {cycle} joint {j}: {acc}");
                 // Joint 0 never passes the target (no overshoot beyond numerical noise).
-                assert!(s.actual_q[0] <= target[0] + 1e-4, "cycle {cycle}: q0 {} qd0 {} target {}", s.actual_q[0], s.actual_qd[0], target[0]);
+                assert!(
+                    s.actual_q[0] <= target[0] + 1e-4,
+                    "cycle {cycle}: q0 {} qd0 {} target {}",
+                    s.actual_q[0],
+                    s.actual_qd[0],
+                    target[0]
+                );
             }
             peak = peak.max(s.actual_qd[0].abs());
             prev = s;

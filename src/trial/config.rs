@@ -87,7 +87,6 @@ impl Default for ProgressConfig {
     }
 }
 
-
 /// The robot base pose in the workspace frame.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -16,11 +16,12 @@ use adapt::controller::{
     Controller, ControllerConfig, MotionAdaptation, OperatorView, RawHandoverFile, SmoothnessScale,
     SpeedScale,
 };
+use adapt::envelope::SafetyEnvelope;
 use adapt::task::{Phase, TaskEventKind};
 use anyhow::Context as _;
 use assess::{AreaRole, AssessConfig, Assessor, CueFrame, RobotContext, Workspace};
 use policies::{Adaptation, PolicyKind, RuleTable, TaskContext, TaskPhase};
-use robot_io::geometry::{HumanBody, Torso};
+use robot_io::geometry::{ARM_CAPSULES, Capsule, HumanBody, Torso, closest_approaches};
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Robot, RobotState};
 use safety::{Supervisor, SupervisorConfig, Verdict, Violation, WorldView};
@@ -118,8 +119,9 @@ pub(super) fn motion_adaptation(a: &Adaptation) -> MotionAdaptation {
         s => Duration::try_from_secs_f64(s).map_or(max, |d| d.min(max)),
     };
     MotionAdaptation {
-        speed_scale: SpeedScale::new(a.speed_scale.get()).unwrap_or(SpeedScale::ONE),
-        smoothness_scale: SmoothnessScale::new(smooth).unwrap_or(SmoothnessScale::ONE),
+        // A scale that does not map fails closed: slow and smooth, never full speed.
+        speed_scale: SpeedScale::new(a.speed_scale.get()).unwrap_or(SpeedScale::CAUTIOUS),
+        smoothness_scale: SmoothnessScale::new(smooth).unwrap_or(SmoothnessScale::CAUTIOUS),
         start_delay: bounded(a.timing.start_delay_s),
         min_approach_duration: bounded(a.timing.min_approach_duration_s),
         wait_for_attention: a.timing.gates_start(),
@@ -237,8 +239,56 @@ impl RobotChoice {
 enum Clock {
     /// Cycle count × 2 ms (the lockstep `SimRobot`).
     Mock,
-    /// The controller timestamp of each new sample, from the first one.
-    Controller,
+    /// The controller timestamp of each new sample, from the first one; the controller's clock
+    /// runs this many times as fast as the wall clock (the emulator's speedup; 1 for a robot).
+    Controller(f64),
+}
+
+/// Wall-clock timing of the control cycle on a robot's clock (never on the mock clock, whose
+/// trials stay deterministic): the latency from a sample's read to the command's send, and the
+/// wake jitter — how far the wall time between two consecutive fresh samples' reads departs
+/// from the controller time between them (scaled to wall time by the clock's rate), |Δwall −
+/// Δts / rate|; a drifting emulator clock does not accumulate into it.
+#[derive(Debug)]
+struct CycleTimer {
+    rate: f64,
+    arrival: Instant,
+    last_fresh: Option<(Instant, f64)>,
+    jitter_s: Option<f64>,
+}
+
+impl CycleTimer {
+    fn new(rate: f64) -> Self {
+        Self {
+            rate: if rate.is_finite() && rate > 0.0 {
+                rate
+            } else {
+                1.0
+            },
+            arrival: Instant::now(),
+            last_fresh: None,
+            jitter_s: None,
+        }
+    }
+
+    /// A sample with controller timestamp `ts` [s] was just read (`fresh`: a new one).
+    fn arrived(&mut self, ts: f64, fresh: bool) {
+        self.arrival = Instant::now();
+        self.jitter_s = None;
+        if !fresh || !ts.is_finite() {
+            return;
+        }
+        if let Some((wall, last_ts)) = self.last_fresh {
+            let wall_s = self.arrival.duration_since(wall).as_secs_f64();
+            self.jitter_s = Some((wall_s - (ts - last_ts) / self.rate).abs());
+        }
+        self.last_fresh = Some((self.arrival, ts));
+    }
+
+    /// Wall time since the arrival [s].
+    fn latency_s(&self) -> f64 {
+        self.arrival.elapsed().as_secs_f64()
+    }
 }
 
 /// Why a trial ended: `summary.json`'s `finish_reason`, the `Finished` event's reason. The
@@ -531,7 +581,7 @@ pub(crate) fn run_trial_with_cues(
                 spec,
                 setup,
                 robot,
-                Clock::Controller,
+                Clock::Controller(f64::from(*speedup)),
                 "emulator",
                 out_dir,
                 stop,
@@ -546,7 +596,7 @@ pub(crate) fn run_trial_with_cues(
                 spec,
                 setup,
                 robot,
-                Clock::Controller,
+                Clock::Controller(1.0),
                 host,
                 out_dir,
                 stop,
@@ -668,7 +718,12 @@ fn drive<R: TrialRobot>(
     let mut policy = spec.policy.build(&table);
     let mut assessor = Assessor::new(workspace.clone(), assess_cfg.clone())?;
     let mut operator = SimulatedOperator::new(spec.condition, &workspace, spec.seed)?;
-    let mut supervisor = Supervisor::new(robot, SupervisorConfig::ur5e())?;
+    let supervisor_cfg = SupervisorConfig::ur5e();
+    let mut ctl_cfg = ctl_cfg;
+    // The planner stays inside the supervisor's own limits (the same numbers, checked
+    // independently by each).
+    ctl_cfg.envelope = planner_envelope(&supervisor_cfg)?;
+    let mut supervisor = Supervisor::new(robot, supervisor_cfg)?;
     let mut controller = Controller::new(ctl_cfg)?;
     let meta = TrialMeta {
         participant: spec.participant.clone(),
@@ -740,6 +795,11 @@ fn drive<R: TrialRobot>(
     // Link loss (controller clock only; see "Link loss" in the module docs).
     let link_cfg = cfg.link;
     let mut last_ts = f64::NEG_INFINITY; // the newest robot timestamp seen
+    let mut capsules = [Capsule::point([0.0; 3], 0.0); ARM_CAPSULES];
+    let mut timer = match clock {
+        Clock::Mock => None,
+        Clock::Controller(rate) => Some(CycleTimer::new(rate)),
+    };
     let mut outage: Option<Outage> = None;
     let mut stuck = StuckWatch::new(cfg.progress.stuck_after_s);
     // Why the trial ended, when the reason alone does not say it.
@@ -765,12 +825,15 @@ fn drive<R: TrialRobot>(
             if fresh {
                 last_ts = state.timestamp_s;
             }
+            if let Some(timer) = timer.as_mut() {
+                timer.arrived(state.timestamp_s, fresh);
+            }
             let dt = match clock {
                 Clock::Mock => {
                     t = k as f64 * CYCLE_S;
                     CYCLE_S
                 }
-                Clock::Controller => {
+                Clock::Controller(_) => {
                     let now = Instant::now();
                     if fresh && matches!(supervisor.latched(), Some(Violation::SendFailed)) {
                         // A send failed while the link was down (SAF-REQ-012); the link is back:
@@ -1074,32 +1137,22 @@ fn drive<R: TrialRobot>(
                 log.robot_state(t, &state)?;
             }
             log.command(t, &cmd, &verdict)?;
-            let smooth = motion.smoothness_scale.get();
             log.cycle(
                 t,
                 &CycleRecord {
                     missed: match clock {
                         Clock::Mock => 0,
-                        Clock::Controller => ((dt / CYCLE_S).round() as u32).saturating_sub(1),
+                        Clock::Controller(_) => ((dt / CYCLE_S).round() as u32).saturating_sub(1),
                     },
-                    // TODO(lead): wall-clock latency and wake jitter from the real-time runtime.
-                    latency_s: None,
-                    wake_jitter_s: None,
-                    jerk_limit_rad_s3: controller
-                        .config()
-                        .limits
-                        .max_jerk()
-                        .iter()
-                        .fold(0.0_f64, |m, j| m.max(*j))
-                        * smooth
-                        * smooth,
-                    // TODO(lead): the planner's time-scaling factor once the controller has one.
-                    time_scale: 1.0,
+                    latency_s: timer.as_ref().map(CycleTimer::latency_s),
+                    wake_jitter_s: timer.as_ref().and_then(|t| t.jitter_s),
+                    jerk_limit_rad_s3: controller.jerk_limit_rad_s3(),
+                    time_scale: controller.scale_report().scale,
                 },
             )?;
             log.human_distance(
                 t,
-                min_human_distance_m(&humans, controller.control_points()),
+                min_human_distance_m(&humans, &state.actual_q, supervisor.config(), &mut capsules),
             )?;
             let intervention = match &verdict {
                 Verdict::Passed => None,
@@ -1137,7 +1190,7 @@ fn drive<R: TrialRobot>(
     // 1. Stop the robot through the supervisor.
     let t_end = match clock {
         Clock::Mock => k as f64 * CYCLE_S,
-        Clock::Controller => t + CYCLE_S,
+        Clock::Controller(_) => t + CYCLE_S,
     };
     let stopped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         stop_robot(&mut supervisor, &mut state, &mut world, t_end);
@@ -1194,6 +1247,24 @@ fn drive<R: TrialRobot>(
         error,
     }
     .into())
+}
+
+/// The planner's [`SafetyEnvelope`]: the supervisor's joint, TCP, collaboration and
+/// staleness limits, its stop deceleration and its separation, arm and body models.
+pub(crate) fn planner_envelope(cfg: &SupervisorConfig) -> anyhow::Result<SafetyEnvelope> {
+    SafetyEnvelope::new(
+        cfg.joint_rates.max_speed_rad_s(),
+        cfg.joint_rates.max_acc_rad_s2(),
+        cfg.joint_rates.stop_decel_rad_s2(),
+        cfg.tcp_speed.m_s(),
+        cfg.collaboration_tcp_speed.m_s(),
+        cfg.stale_perception_scale.get(),
+        cfg.staleness.perception_reduce_after_s(),
+        cfg.separation,
+        cfg.arm,
+        cfg.body,
+    )
+    .context("the supervisor's limits do not make a planning envelope")
 }
 
 /// A robot clock this far behind trial time [s] was restarted (a new controller): trial time
@@ -1288,26 +1359,20 @@ fn stop_robot<R: Robot>(
     }
 }
 
-/// The minimum distance between a tracked human point (head, hands; base frame) and the
-/// robot's control points (TCP, wrist, elbow at the measured joints) [m]; `None` when no human
-/// point is tracked.
+/// The smallest surface distance between the operator's tracked body (head, hands, torso;
+/// base frame) and the arm's capsules at the measured joints `q` [rad], with the supervisor's
+/// arm and body models [m]; `None` when nothing is tracked. `capsules` is scratch space.
 fn min_human_distance_m(
     humans: &HumanBody,
-    points: &robot_io::kinematics::ControlPoints,
+    q: &robot_io::Joints,
+    cfg: &SupervisorConfig,
+    capsules: &mut [Capsule; ARM_CAPSULES],
 ) -> Option<f64> {
-    [humans.head_m, humans.left_hand_m, humans.right_hand_m]
+    cfg.arm.capsules(q, capsules);
+    closest_approaches(capsules, humans, &cfg.body)
         .iter()
         .flatten()
-        .flat_map(|h| {
-            points.iter().map(move |p| {
-                let d = [
-                    h[0] - p.position.x,
-                    h[1] - p.position.y,
-                    h[2] - p.position.z,
-                ];
-                (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
-            })
-        })
+        .map(|a| a.distance_m)
         .reduce(f64::min)
 }
 
@@ -1403,6 +1468,18 @@ pub(crate) fn test_spec(condition: Level, seed: u64, max_s: f64) -> TrialSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The planner plans under exactly the supervisor's numbers (issue 10: "the allowed speed
+    /// comes from the same SSM/PFL formulas and caps that the supervisor checks").
+    #[test]
+    fn the_planner_envelope_is_the_supervisors_limits() {
+        let env = planner_envelope(&SupervisorConfig::ur5e()).unwrap();
+        assert_eq!(env, SafetyEnvelope::ur5e());
+        let mut cfg = SupervisorConfig::ur5e();
+        cfg.collaboration_tcp_speed = safety::SpeedLimit::new(0.2).unwrap();
+        let env = planner_envelope(&cfg).unwrap();
+        assert_eq!(env.collaboration_tcp_speed_m_s(), 0.2);
+    }
 
     fn spec(seed: u64, max_s: f64) -> TrialSpec {
         test_spec(Level::L2, seed, max_s)

@@ -73,7 +73,7 @@ fn run_on_emulator(
         spec,
         setup,
         robot,
-        Clock::Controller,
+        Clock::Controller(10.0),
         "emulator",
         out,
         stop,
