@@ -539,9 +539,11 @@ mod tests {
         assert!((l.reachable_drop(0.2) - 0.2).abs() < 1e-12);
         assert!((l.reachable_drop(0.5) - 0.8).abs() < 1e-12);
         assert_eq!(l.reachable_drop(-1.0), 0.0);
-        // 1 → 0 takes 1/2 + 2/10 = 0.7 s.
+        // A full stop 1 → 0 (ending at ṡ = 0) takes 1/2 + 2/10 = 0.7 s. reachable_drop is the
+        // drop by h with the rate still at −ṡ_max (no ramp-down): at 0.7 s 2·(0.7 − 0.1) = 1.2,
+        // the stop's 1 plus the ramp-down's ṡ_max²/(2 s̈_max) = 4/20 = 0.2.
         assert!((l.full_stop_s() - 0.7).abs() < 1e-12);
-        assert!((l.reachable_drop(0.7) - 1.0).abs() < 1e-12);
+        assert!((l.reachable_drop(0.7) - 1.2).abs() < 1e-12);
     }
 
     #[test]
