@@ -1,0 +1,295 @@
+//! SAF-REQ-003/004 after missed cycles: a servo step is judged over the controller time since
+//! the previous servo command (1 to 8 cycles), not over one cycle. On `SimRobot` (2 ms mock
+//! clock), the robot stepping several cycles between the supervisor's reads, as on a loaded
+//! machine. Wrist 3 turns alone (it does not move the TCP, so SAF-REQ-005 stays out of it).
+//! The figures are computed by hand in the comments.
+
+mod common;
+
+use std::cell::RefCell;
+use std::f64::consts::PI;
+use std::rc::Rc;
+
+use common::{DT, Q_WORK, SharedSim, servo};
+use robot_io::sim::{SimConfig, SimRobot};
+use robot_io::{JointCommand, Joints, RobotState};
+use safety::{Requirement, Supervisor, SupervisorConfig, Verdict, Violation, WorldView};
+
+/// The joint that turns: wrist 3.
+const J: usize = 5;
+
+struct Rig {
+    sim: Rc<RefCell<SimRobot>>,
+    sup: Supervisor<SharedSim>,
+    state: RobotState,
+}
+
+impl Rig {
+    fn new() -> Rig {
+        let sim = Rc::new(RefCell::new(
+            SimRobot::new(SimConfig {
+                initial_q_rad: Q_WORK,
+                ..SimConfig::ur5e()
+            })
+            .unwrap(),
+        ));
+        let sup = Supervisor::new(SharedSim(sim.clone()), SupervisorConfig::ur5e()).unwrap();
+        Rig {
+            sim,
+            sup,
+            state: RobotState::default(),
+        }
+    }
+
+    /// Let the robot run `cycles` cycles, read its state, and judge the servo command `q`.
+    fn command_after(&mut self, cycles: usize, q: Joints) -> Verdict {
+        for _ in 0..cycles {
+            self.sim.borrow_mut().step();
+        }
+        self.sup.read_state(&mut self.state).unwrap();
+        self.sup
+            .step(&servo(q), &WorldView::clear(self.state.timestamp_s))
+    }
+
+    fn sent(&self) -> Joints {
+        match self.sup.last_sent().map(|c| *c.command()) {
+            Some(JointCommand::Servo { q, .. }) => q,
+            other => panic!("no servo command sent: {other:?}"),
+        }
+    }
+
+    fn fired(&self, r: Requirement) -> u64 {
+        self.sup.counters().fired(r)
+    }
+}
+
+/// An upstream planner commanding every `period` cycles: wrist 3 accelerates at `acc`
+/// [rad/s²] towards `speed` [rad/s]; `next` gives the positions of the next command.
+struct Ramp {
+    q: Joints,
+    v: f64,
+    speed: f64,
+    acc: f64,
+    period_s: f64,
+}
+
+impl Ramp {
+    fn new(speed: f64, acc: f64, period: usize) -> Ramp {
+        Ramp {
+            q: Q_WORK,
+            v: 0.0,
+            speed,
+            acc,
+            period_s: DT * period as f64,
+        }
+    }
+
+    fn next(&mut self) -> Joints {
+        let dv = (self.speed - self.v).clamp(-self.acc * self.period_s, self.acc * self.period_s);
+        self.v += dv;
+        self.q[J] += self.v * self.period_s;
+        self.q
+    }
+}
+
+/// A hold at the start pose (the first servo command is judged from the robot's target state
+/// over one cycle; it sets the reference for the elapsed-time rule).
+fn started() -> Rig {
+    let mut rig = Rig::new();
+    assert_eq!(rig.command_after(0, Q_WORK), Verdict::Passed);
+    rig
+}
+
+#[test]
+fn saf_req_003_ramp_commanded_every_third_cycle_is_judged_over_the_elapsed_time() {
+    // Every 3rd cycle (6 ms), wrist 3 ramps at 0.5 π rad/s² to 0.9 π rad/s and cruises: each
+    // step is at most 0.9 π · 0.006 = 0.016965 rad. Judged over the 6 ms that elapsed, that is
+    // 0.9 π rad/s < π: every command passes. (Divided by one 2 ms cycle, as before issue 10,
+    // the same step read 0.016965 / 0.002 = 8.48 rad/s = 2.7 π and was reduced to
+    // π / 8.48 = 0.370 of itself, SAF-REQ-003.)
+    let mut rig = started();
+    let mut ramp = Ramp::new(0.9 * PI, 0.5 * PI, 3);
+    for k in 0..400 {
+        // 1.8 s of ramp (300 commands), then cruise.
+        let q = ramp.next();
+        let v = rig.command_after(3, q);
+        assert_eq!(v, Verdict::Passed, "command {k} at {} rad/s", ramp.v);
+        assert_eq!(rig.sent(), q, "sent unchanged");
+    }
+    assert!((ramp.v - 0.9 * PI).abs() < 1e-12);
+    assert_eq!(rig.fired(Requirement::Saf003JointSpeed), 0);
+    assert_eq!(rig.fired(Requirement::Saf004JointAcceleration), 0);
+    // Above the limit it is the true speed that is judged: ramping on past π rad/s, the first
+    // command over π is reduced to π, and the violation reports the speed over 6 ms.
+    let mut rig = started();
+    let mut ramp = Ramp::new(1.05 * PI, 0.5 * PI, 3);
+    loop {
+        let q = ramp.next();
+        let v = rig.command_after(3, q);
+        if ramp.v <= PI {
+            assert_eq!(v, Verdict::Passed, "at {} rad/s", ramp.v);
+            continue;
+        }
+        match v {
+            Verdict::Reduced {
+                scale,
+                violation:
+                    Violation::JointSpeed {
+                        joint,
+                        value_rad_s,
+                        limit_rad_s,
+                    },
+            } => {
+                assert_eq!(joint, J);
+                assert!(
+                    (value_rad_s - ramp.v).abs() < 1e-9,
+                    "{value_rad_s} vs {}",
+                    ramp.v
+                );
+                assert_eq!(limit_rad_s, PI);
+                assert!((scale - PI / ramp.v).abs() < 1e-9, "{scale}");
+            }
+            other => panic!("at {} rad/s: {other:?}", ramp.v),
+        }
+        break;
+    }
+    assert_eq!(rig.fired(Requirement::Saf003JointSpeed), 1);
+}
+
+#[test]
+fn saf_req_003_a_gap_longer_than_8_cycles_is_judged_as_8() {
+    // Wrist 3 cruises at 0.99 π rad/s, commanded every 3rd cycle. Then 9 cycles pass without a
+    // command, and the next one continues the motion: a step of 0.99 π · 0.018 = 0.055984 rad.
+    // Judged over 8 cycles (16 ms, the longest period the rule allows), that is
+    // 0.055984 / 0.016 = 3.49895 rad/s = 1.11375 π > π: reduced (conservative) to
+    // π / 3.49895 = 0.897868, a step of π · 0.016 = 0.050265 rad. The acceleration check
+    // allows this scale: |s · 3.49895 − 3.11018| ≤ π · 0.016 = 0.050265 for s in
+    // [0.874524, 0.903250].
+    let mut rig = started();
+    let mut ramp = Ramp::new(0.99 * PI, 0.5 * PI, 3);
+    for _ in 0..400 {
+        let q = ramp.next();
+        assert_eq!(rig.command_after(3, q), Verdict::Passed);
+    }
+    assert!((ramp.v - 0.99 * PI).abs() < 1e-12);
+    let from = rig.sent();
+    let mut late = ramp;
+    late.period_s = 9.0 * DT;
+    let q = late.next();
+    assert!((q[J] - from[J] - 0.055_984).abs() < 1e-6);
+    match rig.command_after(9, q) {
+        Verdict::Reduced {
+            scale,
+            violation: Violation::JointSpeed { value_rad_s, .. },
+        } => {
+            assert!((scale - 0.897_868).abs() < 1e-6, "{scale}");
+            assert!((value_rad_s - 3.498_95).abs() < 1e-5, "{value_rad_s}");
+        }
+        other => panic!("{other:?}"),
+    }
+    let step = rig.sent()[J] - from[J];
+    assert!((step - 0.050_265).abs() < 1e-6, "{step}");
+    assert!(step < q[J] - from[J], "the bigger step is reduced");
+
+    // The same step after exactly 8 cycles (0.99 π · 0.016 = 0.049763 rad) passes.
+    let mut rig = started();
+    let mut ramp = Ramp::new(0.99 * PI, 0.5 * PI, 3);
+    for _ in 0..400 {
+        let q = ramp.next();
+        assert_eq!(rig.command_after(3, q), Verdict::Passed);
+    }
+    ramp.period_s = 8.0 * DT;
+    let q = ramp.next();
+    assert_eq!(rig.command_after(8, q), Verdict::Passed);
+    assert_eq!(rig.sent(), q);
+}
+
+#[test]
+fn saf_req_004_ramp_commanded_every_third_cycle_is_judged_over_the_elapsed_time() {
+    // The ramp at 0.5 π rad/s² commanded every 3rd cycle: the implied velocity grows by
+    // 0.5 π · 0.006 = 0.009425 rad/s per command, over the 6 ms elapsed 0.5 π rad/s² < π.
+    // (Over one 2 ms cycle, as before issue 10, both the steps and their change were divided
+    // by 2 ms instead of 6 ms: (Δq_k − Δq_k−1) / 0.002² = a · 0.006² / 0.002² = 9 a =
+    // 4.5 π rad/s², SAF-REQ-004 on every ramp command.)
+    let mut rig = started();
+    let mut ramp = Ramp::new(0.9 * PI, 0.5 * PI, 3);
+    for _ in 0..320 {
+        let q = ramp.next();
+        assert_eq!(
+            rig.command_after(3, q),
+            Verdict::Passed,
+            "at {} rad/s",
+            ramp.v
+        );
+    }
+    assert_eq!(rig.fired(Requirement::Saf004JointAcceleration), 0);
+
+    // The same first ramp step one cycle after the hold: 0.009425 rad/s · 0.006 s =
+    // 5.655e-5 rad read over 2 ms as 0.028274 rad/s from rest, 14.14 rad/s² = 4.5 π: reduced
+    // to the acceleration limit, scale π · 0.002 / 0.028274 = 2/9 = 0.222222.
+    let mut rig = started();
+    let mut ramp = Ramp::new(0.9 * PI, 0.5 * PI, 3);
+    let q = ramp.next();
+    match rig.command_after(1, q) {
+        Verdict::Reduced {
+            scale,
+            violation: Violation::JointAcceleration { value_rad_s2, .. },
+        } => {
+            assert!((scale - 2.0 / 9.0).abs() < 1e-6, "{scale}");
+            assert!((value_rad_s2 - 4.5 * PI).abs() < 1e-6, "{value_rad_s2}");
+        }
+        other => panic!("{other:?}"),
+    }
+    // After 3 cycles it passes.
+    let mut rig = started();
+    let mut ramp = Ramp::new(0.9 * PI, 0.5 * PI, 3);
+    assert_eq!(rig.command_after(3, ramp.next()), Verdict::Passed);
+
+    // Above the limit the true acceleration is judged: a ramp at 1.2 π rad/s² every 3rd cycle
+    // is reduced, and the violation reports 1.2 π (not 9 × 1.2 π).
+    let mut rig = started();
+    let mut ramp = Ramp::new(0.9 * PI, 1.2 * PI, 3);
+    match rig.command_after(3, ramp.next()) {
+        Verdict::Reduced {
+            violation: Violation::JointAcceleration { value_rad_s2, .. },
+            ..
+        } => assert!((value_rad_s2 - 1.2 * PI).abs() < 1e-6, "{value_rad_s2}"),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn saf_req_004_a_gap_longer_than_8_cycles_is_judged_as_8() {
+    // Wrist 3 cruises at 0.5 π rad/s (every 3rd cycle), then 12 cycles pass and the next
+    // command continues the motion: a step of 0.5 π · 0.024 = 0.037699 rad. Judged over 8
+    // cycles (16 ms) it implies 2.35619 rad/s = 0.75 π, a change of 0.25 π rad/s within 16 ms
+    // (49.1 rad/s²) from the previous 1.570796 rad/s: reduced to the largest scale the
+    // acceleration limit allows, s = (1.570796 + π · 0.016) / 2.35619 = 0.688000, a step of
+    // 0.688 · 2.35619 · 0.016 = 0.025937 rad. Judged over the real 24 ms it would have
+    // passed (0.5 π rad/s, no change): a longer gap is judged conservatively.
+    let mut rig = started();
+    let mut ramp = Ramp::new(0.5 * PI, 0.5 * PI, 3);
+    for _ in 0..200 {
+        let q = ramp.next();
+        assert_eq!(rig.command_after(3, q), Verdict::Passed);
+    }
+    assert!((ramp.v - 0.5 * PI).abs() < 1e-12);
+    let from = rig.sent();
+    ramp.period_s = 12.0 * DT;
+    let q = ramp.next();
+    assert!((q[J] - from[J] - 0.037_699).abs() < 1e-6);
+    match rig.command_after(12, q) {
+        Verdict::Reduced {
+            scale,
+            violation: Violation::JointAcceleration { joint, .. },
+        } => {
+            assert_eq!(joint, J);
+            assert!((scale - 0.688).abs() < 1e-6, "{scale}");
+        }
+        other => panic!("{other:?}"),
+    }
+    let step = rig.sent()[J] - from[J];
+    assert!((step - 0.025_937).abs() < 1e-6, "{step}");
+    assert_eq!(rig.fired(Requirement::Saf004JointAcceleration), 1);
+    assert_eq!(rig.fired(Requirement::Saf003JointSpeed), 0);
+}
