@@ -27,7 +27,9 @@ fn step_allocates_nothing_over_a_whole_handover() {
         min_approach_duration: std::time::Duration::from_secs(2),
         ..MotionAdaptation::default()
     };
-    let (home, intrusion) = ([-1.25, -0.13, 0.2], [-0.97, -0.13, 0.25]);
+    // The SIMULATED hand rests 0.79 m from the handover pose (outside the planner's protective
+    // distance at rest) and intrudes into the approach path for 1 s (tests/controller.rs).
+    let (home, intrusion) = ([-1.45, -0.45, 0.2], [-1.15, -0.3, 0.25]);
     let mut hand: [f64; 3] = home;
     let mut approach_cycles = 0u32;
     ctl.start_handover();
@@ -56,7 +58,7 @@ fn step_allocates_nothing_over_a_whole_handover() {
         }
         let humans = OperatorView {
             body: HumanBody {
-                head_m: Some([-1.45, -0.13, 0.75]),
+                head_m: Some([-1.6, -0.6, 0.6]),
                 left_hand_m: None,
                 right_hand_m: Some(hand),
                 torso: None,
