@@ -415,8 +415,11 @@ const SETTLE_DWELL_S: f64 = 0.25;
 /// A robot whose target joint speeds are all below this is at rest for a re-synchronisation
 /// [rad/s].
 const REST_SPEED_RAD_S: f64 = 1e-3;
-/// The most cycles one step catches up after missed cycles [-].
-const MAX_CATCH_UP_CYCLES: f64 = 25.0;
+/// The most cycles one step catches up after missed cycles [-]: the safety supervisor judges a
+/// servo step over at most this many cycles too (`MAX_COMMAND_PERIOD_CYCLES` in
+/// `safety::supervisor`), so a longer gap delays the plan instead of making its next step look
+/// like a speed jump.
+const MAX_CATCH_UP_CYCLES: f64 = 8.0;
 
 /// Tracks the operator's points between perception frames: last position and a smoothed
 /// velocity per point, for the lookahead's prediction. Allocates nothing.
@@ -581,6 +584,8 @@ pub struct Controller {
     arrive_not_before_s: Option<f64>,
     /// The adaptation scales behind the path limits in force.
     applied_scales: (f64, f64),
+    /// The adaptation's scales of the latest step (the next path's).
+    wanted_scales: (f64, f64),
     /// C(t) when the current path was planned (its TCP cap).
     planned_collaborating: bool,
     last_plan: PlanStatus,
@@ -623,6 +628,7 @@ impl Controller {
             target: None,
             arrive_not_before_s: None,
             applied_scales: (1.0, 1.0),
+            wanted_scales: (1.0, 1.0),
             planned_collaborating: false,
             last_plan: PlanStatus::Finished,
             last_now_s: None,
@@ -828,8 +834,11 @@ impl Controller {
         );
         let collaborating = self.task.collaborating();
         let mut replan = false;
-        if scales != self.applied_scales {
-            self.applied_scales = scales;
+        // New adaptation scales shape the next path; a path under way keeps its limits (a
+        // re-plan mid-motion under other limits can turn a joint back), except that a lower
+        // speed scale applies at once through the time scale (below).
+        self.wanted_scales = scales;
+        if scales != self.applied_scales && self.last_plan == PlanStatus::Finished {
             replan = true;
         }
         if collaborating != self.planned_collaborating {
@@ -878,7 +887,12 @@ impl Controller {
         }
 
         // 3. Time scaling: the largest target the lookahead allows, then one jerk-limited step.
-        let raw_target = self.scale_target(humans, view.perception_age_s, collaborating);
+        let mut raw_target = self.scale_target(humans, view.perception_age_s, collaborating);
+        // A speed scale lowered during a motion applies through the time scale.
+        let speed_ratio = self.wanted_scales.0 / self.applied_scales.0;
+        if speed_ratio < raw_target {
+            raw_target = speed_ratio;
+        }
         // Hold a reduction for TARGET_HOLD_S before the target may rise again, so noise in the
         // operator's tracked points never makes the speed pump (stop-and-go); a lower target
         // always applies at once.
@@ -1011,6 +1025,7 @@ impl Controller {
             .arrive_not_before_s
             .map(|t| t - now)
             .filter(|r| *r > 0.0);
+        self.applied_scales = self.wanted_scales;
         let (speed, smooth) = self.applied_scales;
         let env = self.cfg.envelope;
         let fraction = self.cfg.planning.get().speed_fraction;

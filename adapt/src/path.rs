@@ -41,8 +41,8 @@
 
 use robot_io::Joints;
 use rsruckig::prelude::{
-    ControlInterface, DataArrayOrVec, InputParameter, Ruckig, RuckigResult, ThrowErrorHandler,
-    Trajectory,
+    ControlInterface, DataArrayOrVec, InputParameter, Ruckig, RuckigResult, Synchronization,
+    ThrowErrorHandler, Trajectory,
 };
 
 use crate::otg::{DOF, MotionLimits, UR5E_CYCLE_S};
@@ -130,6 +130,10 @@ impl Path {
     /// `limits` as its initial limits.
     pub fn new(limits: MotionLimits) -> Path {
         let mut input = InputParameter::new(None);
+        // Phase synchronisation: a rest-to-rest motion is a straight line in joint space, so no
+        // joint turns back on the way (Ruckig falls back to time synchronisation when the start
+        // state does not allow it).
+        input.synchronization = Synchronization::Phase;
         for i in 0..DOF {
             set(&mut input.max_velocity, i, limits.max_velocity().get(i));
             set(

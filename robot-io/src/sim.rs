@@ -223,6 +223,10 @@ struct JointLimits {
     max_acc: f64,
 }
 
+/// A servo target unchanged for this many cycles holds still (20 ms): only then the
+/// no-overshoot braking cap applies (see `SimRobot::servo`) [-].
+const HELD_TARGET_CYCLES: u32 = 10;
+
 /// Per-joint model state.
 #[derive(Debug, Clone, Copy, Default)]
 struct JointState {
@@ -232,8 +236,10 @@ struct JointState {
     qd: f64,
     /// servoJ filtered reference [rad].
     servo_ref: f64,
-    /// The servo target of the previous cycle [rad] (for the target's own velocity).
+    /// The servo target of the previous cycle [rad].
     servo_target: f64,
+    /// Cycles the servo target has stayed the same [-].
+    held_cycles: u32,
 }
 
 /// What the arm does this cycle.
@@ -305,6 +311,7 @@ impl SimRobot {
                 qd: 0.0,
                 servo_ref: q,
                 servo_target: q,
+                held_cycles: 0,
             };
         }
         let mut robot = SimRobot {
@@ -661,6 +668,7 @@ impl SimRobot {
             for (j, t) in self.joints.iter_mut().zip(target) {
                 j.servo_ref = j.q;
                 j.servo_target = *t;
+                j.held_cycles = 0;
             }
             self.servo_active = true;
         }
@@ -683,12 +691,18 @@ impl SimRobot {
             let correction = (error * track / CYCLE_S).clamp(-correction_cap, correction_cap);
             let cap = l.max_speed * scale;
             let mut wanted = ((feedforward + correction) * scale).clamp(-cap, cap);
-            // No overshoot of a target that holds still (a step, or the end of a motion): the
-            // speed toward it stays one from which the joint can stop at it. A moving target
-            // (a trajectory streamed every cycle) is tracked by the feedforward instead.
-            let held = *t == j.servo_target;
+            // No overshoot of a target that holds still (a step, or the end of a motion: the
+            // same target for HELD_TARGET_CYCLES cycles): the speed toward it stays one from
+            // which the joint can stop at it. A moving target — a trajectory streamed every
+            // cycle, or every few cycles when commands come late or in bursts — is tracked by
+            // the feedforward instead.
+            if *t == j.servo_target {
+                j.held_cycles = j.held_cycles.saturating_add(1);
+            } else {
+                j.held_cycles = 0;
+            }
             j.servo_target = *t;
-            if held {
+            if j.held_cycles >= HELD_TARGET_CYCLES {
                 let to_target = t - j.q;
                 // The discrete braking curve: from this speed, slowing by a·dt per cycle
                 // (with q += v·dt after each change) covers at most |to_target|.

@@ -40,10 +40,12 @@
 //! # Stop-and-go
 //! The TCP speed v = |(ẋ, ẏ, ż)| of every state, its recent peak P(t) = max v over
 //! [t − [`PEAK_WINDOW_S`], t]. Armed, a sample with P ≥ [`MIN_PEAK_M_S`] and v < P/2 starts a
-//! dip at level L = P/2 (frozen). The dip is a **stop-and-go event** if v gets back to ≥ L at
-//! most [`RECOVERY_S`] after the dip started; the event is outside stops only if no sample of
-//! the dip is inside a stop window. A dip not recovered by then is no event (the arm came to a
-//! stop), and the detector re-arms once v ≥ P/2 again.
+//! dip, with the peak P frozen. The dip is a **stop-and-go event** if v recovers — gets back to
+//! ≥ [`RECOVERY_SHARE`] · P, "go" again — at most [`RECOVERY_S`] after the dip started; the
+//! event is outside stops only if no sample of the dip is inside a stop window. A dip not
+//! recovered by then is no event (the arm came to a stop, or went on slower: a speed that only
+//! hovers about P/2, as a motion slowed smoothly for a nearby hand does, is not stop-and-go),
+//! and the detector re-arms once v ≥ P/2 again.
 //!
 //! # Cycle records, latency and jitter
 //! Missed cycles are summed from [`CycleRecord::missed`]. Latency and wake jitter go into
@@ -79,6 +81,8 @@ pub(crate) const REVERSAL_WINDOW_S: f64 = 0.3;
 pub(crate) const PEAK_WINDOW_S: f64 = 1.0;
 /// A dip is a stop-and-go event if the speed recovers within this time [s].
 pub(crate) const RECOVERY_S: f64 = 0.5;
+/// A dip has recovered when the speed is back at this share of the peak before it [-].
+pub(crate) const RECOVERY_SHARE: f64 = 0.8;
 /// A recent peak below this TCP speed starts no dip (the arm is at rest) [m/s].
 pub(crate) const MIN_PEAK_M_S: f64 = 0.02;
 /// Executed jerk is judged against this factor × the planner's jerk limit [-].
@@ -311,7 +315,7 @@ impl StopAndGo {
                             min_m_s: v,
                             inside_stop: inside,
                         },
-                        level: 0.5 * p,
+                        level: RECOVERY_SHARE * p,
                     };
                 }
                 None
@@ -1277,7 +1281,8 @@ mod tests {
 
     /// Stop-and-go. Worked by hand on a TCP speed profile at 2 ms (trial time = k · 2 ms):
     /// - 0–1 s at 0.2 m/s, then 0.05 m/s for 1.0–1.2 s: below 0.1 (half the recent peak
-    ///   0.2) at 1.0 s, back at 0.2 ≥ 0.1 at 1.2 s: an event of 0.2 s, outside stops;
+    ///   0.2) at 1.0 s, back at 0.2 ≥ 0.16 (0.8 × the peak) at 1.2 s: an event of 0.2 s,
+    ///   outside stops;
     /// - 1.2–3 s at 0.2, then 0 for 3.0–3.8 s: a dip from 3.0 s that has not recovered
     ///   0.5 s later: no event (the arm stopped); back at 0.2 at 3.8 s re-arms;
     /// - 3.8–5 s at 0.2, then 0.05 for 5.0–5.1 s with a SAF-REQ-007 stop at 5.0 s: an event
@@ -1317,6 +1322,33 @@ mod tests {
             inside.inside_stop && near(inside.start_s, 5.0, 1e-6),
             "{inside:?}"
         );
+    }
+
+    /// A speed that falls just below half its peak and hovers there (0.2 m/s, then 0.099 and
+    /// 0.105 m/s alternating every 50 ms for 0.4 s, then 0.11 m/s) never gets back to 0.8 × 0.2
+    /// = 0.16 m/s within 0.5 s: no event. Back at 0.2 m/s 0.3 s after a dip to 0.05 m/s
+    /// (k = 1500): an event.
+    #[test]
+    fn a_speed_hovering_about_half_its_peak_is_no_stop_and_go() {
+        let mut m = MotionMetrics::new();
+        for k in 0..2500u32 {
+            let t = f64::from(k) * H;
+            let v = match k {
+                0..500 => 0.2,
+                500..700 if (k / 25) % 2 == 0 => 0.099,
+                500..700 => 0.105,
+                700..1000 => 0.11,
+                1000..1500 => 0.2,
+                1500..1650 => 0.05,
+                _ => 0.2,
+            };
+            m.on_state(t, &state(t, [0.0; DOF], v));
+            m.on_verdict(t, &Verdict::Passed);
+        }
+        let s = summary(&mut m);
+        let g = &s.stop_and_go;
+        assert_eq!((g.overall, g.outside_stops), (1, 1), "{g:?}");
+        assert!(near(g.events_outside_stops[0].start_s, 3.0, 1e-6), "{g:?}");
     }
 
     /// Interventions and stop windows. Worked by hand on 5 s of 2 ms cycles (k = 0..2500):

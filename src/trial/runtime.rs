@@ -1109,6 +1109,25 @@ fn drive<R: TrialRobot>(
             world.perception_age_s = (t - last_cue_t).max(0.0);
             world.collaborating = controller.collaborating();
             let verdict = supervisor.step(&cmd, &world);
+            if std::env::var("HRC_DEBUG_FROM")
+                .ok()
+                .and_then(|v| v.parse::<f64>().ok())
+                .is_some_and(|f| t >= f && t < f + 0.6)
+            {
+                let r = controller.scale_report();
+                let v = state.actual_tcp_speed;
+                eprintln!(
+                    "DBG t={t:.3} {:?} {:?} s={:.3} tgt={:.3} now={:.3} {:?} d={:.3} tcp={:.4}",
+                    controller.phase(),
+                    verdict.requirement(),
+                    r.scale,
+                    r.target,
+                    r.admissible_now,
+                    r.binding,
+                    r.min_distance_m,
+                    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+                );
+            }
             // A command the supervisor changed was not executed as planned: the controller
             // re-plans from the measured joints (a reduction by rounding alone does not count).
             let overridden = match &verdict {
@@ -1637,25 +1656,68 @@ mod tests {
         );
     }
 
-    /// The controller plans under the supervisor's joint speed, acceleration and TCP limits
-    /// (SAF-REQ-003/004/005) and re-plans after any command the supervisor changed, so in a
-    /// whole simulated trial the supervisor intervenes only for the human's separation
-    /// (SAF-REQ-007). (Planning exactly at the limits, with no re-plan after a stop, gave
-    /// 232 SAF-REQ-004 events in this trial.)
+    /// Issue 10's motion acceptance on whole simulated trials, judged on the raw per-cycle
+    /// signals (summary.json's `motion`, never the debounced events): the planner keeps the
+    /// robot inside the supervisor's limits, so
+    /// - no command is reduced or stopped for joint speed, joint acceleration or TCP speed
+    ///   (SAF-REQ-003/004/005) — the demo had 234 SAF-REQ-004 stops at a077dd5;
+    /// - every stop window is a separation stop (SAF-REQ-007, the simulated hand inside S_p);
+    /// - outside those windows there is no velocity reversal, no stop-and-go event and no
+    ///   executed jerk above 1.1 × the planner's jerk limit.
+    ///
+    /// Six trials: every condition with both policies, different seeds (one of them a trial of
+    /// `config/experiment-ab.toml`, P04's L3/fixed); all 48 of that schedule were checked the
+    /// same way in a release build (issue 10's note).
     #[test]
-    fn the_supervisor_never_corrects_the_plan_in_a_simulated_trial() {
-        let dir = tempfile::tempdir().unwrap();
-        let out = run_simulated(&test_spec(Level::L2, 1, 240.0), dir.path(), false).unwrap();
-        let summary: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
-        assert_eq!(summary["finish_reason"], "completed");
-        let by = summary["safety_events"]["by_requirement"]
-            .as_object()
-            .unwrap();
-        for (requirement, n) in by {
+    fn saf_req_003_004_005_never_act_and_the_motion_is_smooth_in_simulated_trials() {
+        for (condition, seed, policy) in [
+            (Level::L1, 3, PolicyKind::Fixed),
+            (Level::L1, 4, PolicyKind::Adaptive),
+            (Level::L2, 1, PolicyKind::Adaptive),
+            (Level::L2, 2, PolicyKind::Fixed),
+            (Level::L3, 5338130435519176286, PolicyKind::Fixed),
+            (Level::L3, 6, PolicyKind::Adaptive),
+        ] {
+            let dir = tempfile::tempdir().unwrap();
+            let mut s = test_spec(condition, seed, 400.0);
+            s.policy = policy;
+            let out = run_simulated(&s, dir.path(), false).unwrap();
+            let summary: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+            let label = format!("{condition:?} seed {seed} {policy:?}");
+            assert_eq!(summary["finish_reason"], "completed", "{label}");
+            let m = &summary["motion"];
+            for id in ["SAF-REQ-003", "SAF-REQ-004", "SAF-REQ-005"] {
+                let r = &m["interventions"]["by_requirement"][id];
+                for reaction in ["reduced", "stopped", "halted"] {
+                    assert_eq!(r[reaction], 0, "{label}: {id} {reaction}: {r}");
+                }
+            }
             assert_eq!(
-                requirement, "SAF-REQ-007",
-                "{n} {requirement} events: {by:?}"
+                m["stop_windows"]["other"], 0,
+                "{label}: {}",
+                m["stop_windows"]
+            );
+            assert_eq!(
+                m["velocity_reversals"]["outside_stops"]["total"], 0,
+                "{label}: {}",
+                m["velocity_reversals"]
+            );
+            assert_eq!(
+                m["stop_and_go"]["outside_stops"], 0,
+                "{label}: {}",
+                m["stop_and_go"]
+            );
+            assert_eq!(
+                m["jerk_limit"]["outside_stops"]["exceeding"], 0,
+                "{label}: {}",
+                m["jerk_limit"]
+            );
+            // The judged signals are really there (a run of 500 Hz samples, a real hand).
+            assert!(m["jerk"]["outside_stops"]["samples"].as_u64().unwrap() > 10_000);
+            assert!(
+                m["stop_windows"]["separation"].as_u64().unwrap() > 0,
+                "{label}"
             );
         }
     }
