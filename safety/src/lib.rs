@@ -47,9 +47,9 @@
 //! | SAF-REQ-009 | robot-state staleness | > 3 cycles without a new controller timestamp | stop | `saf_req_009_robot_state_staleness` |
 //! | SAF-REQ-001 | non-finite or malformed command or input (robot state, world view, servoJ lookahead ∉ [0.03, 0.2] s or gain ∉ [100, 2000], speedJ acc ≤ 0, stop decel ≤ 0) | any NaN/∞ | stop (the robot holds) | `saf_req_001_non_finite_values_are_rejected`, `saf_req_001_fault_injection_nan_target` |
 //! | SAF-REQ-008 | perception staleness | age > 0.2 s; > 1 s | reduce the speed caps ×0.25; stop | `saf_req_008_perception_staleness`, `saf_req_008_fault_injection_perception_freeze` |
-//! | SAF-REQ-003 | joint speed implied by the command (servoJ: step / 2 ms; speedJ: `qd`) | π rad/s | reduce | `saf_req_003_joint_speed_limit` |
+//! | SAF-REQ-003 | joint speed implied by the command (servoJ: step / the controller time since the previous servo command, 1–8 cycles of 2 ms; speedJ: `qd`) | π rad/s | reduce | `saf_req_003_joint_speed_limit`, `saf_req_003_ramp_commanded_every_third_cycle_is_judged_over_the_elapsed_time`, `saf_req_003_a_gap_longer_than_8_cycles_is_judged_as_8` |
 //! | SAF-REQ-005 | TCP speed implied by the command | 1 m/s; 0.25 m/s while C(t) | reduce | `saf_req_005_tcp_speed_limit` |
-//! | SAF-REQ-004 | joint acceleration (servoJ: change of implied velocity / 2 ms; speedJ: `acc`) | π rad/s² | reduce (clamp); stop if no scale meets it | `saf_req_004_joint_acceleration_limit` |
+//! | SAF-REQ-004 | joint acceleration (servoJ: change of implied velocity over the same period; speedJ: `acc`) | π rad/s² | reduce (clamp); stop if no scale meets it | `saf_req_004_joint_acceleration_limit`, `saf_req_004_ramp_commanded_every_third_cycle_is_judged_over_the_elapsed_time`, `saf_req_004_a_gap_longer_than_8_cycles_is_judged_as_8` |
 //! | SAF-REQ-002 | joint positions of the target and of the stopping configuration | ±2π rad − 0.05 rad margin | stop | `saf_req_002_joint_position_limits` |
 //! | SAF-REQ-006 | TCP, wrist and elbow at the target and stopping configuration inside the workspace box | x, y ∈ [−1, 1] m, z ∈ [0.02, 1.3] m | stop | `saf_req_006_workspace_box` |
 //! | SAF-REQ-007 | every tracked body part (head sphere, hand points, torso capsule) at least S_p from the surface of every arm capsule (shoulder, upper arm, elbow, forearm, three wrists, gripper, carried part), at the measured joints and at the stopping configuration; the violation names the part and the nearest link | S_p = v_h(T_age + T_r + T_s) + v_r T_r + v_r T_s/2 + C + Z_d + Z_r; v_h 2.0 m/s hands, 1.6 m/s head and torso; C 0.1, Z_d 0.05, Z_r 0.02 m | stop | `saf_req_007_protective_separation`, `saf_req_007_hand_at_each_link_surface_stops_at_rest`, `saf_req_007_hand_at_each_link_surface_stops_in_motion`, `saf_req_007_torso_at_each_link_surface_stops_at_rest`, `saf_req_007_torso_at_each_link_surface_stops_in_motion`, `saf_req_007_default_torso_and_head_radii_count`, `saf_req_007_fault_injection_hand_during_approach` |
@@ -90,6 +90,11 @@
 //! ```
 //!
 //! # Limitations
+//! - The robot-side control program extrapolates a late servo target along its feed-forward
+//!   for at most `extrapolate_max_s` (3 cycles on a robot: ≤ π·0.006 + ½π·0.006² ≈ 0.019 rad
+//!   beyond the supervised target; `robot_io::script`). The stopping-configuration check covers
+//!   that distance once the fastest joint moves faster than 2·a_stop·0.006 ≈ 0.038 rad/s; below
+//!   it the target may pass the checked rest point by at most ≈ 3·10⁻⁴ rad.
 //! - SAF-REQ-007's geometry is a model: the capsules cover MuJoCo Menagerie's UR5e collision
 //!   geometry with ≥ 14 mm to spare (`robot-io/tests/geometry.rs`), but not the fixed base or
 //!   the joint-1 column below the shoulder axis; the gripper and part sizes are configured,

@@ -84,6 +84,8 @@ struct ServoReference {
     v: Joints,
     /// Controller timestamp of the state the command was judged on [s].
     timestamp_s: f64,
+    /// The period that command covered [s] (its `v` is the mean velocity over it).
+    period_s: f64,
 }
 
 /// A motion command in the supervisor's terms: the command moves the joints from `q_from`
@@ -94,6 +96,10 @@ struct Motion {
     /// The period the command covers [s]: one cycle, or for a servo step the controller time
     /// since the previous servo command (missed cycles), up to `MAX_COMMAND_PERIOD_CYCLES`.
     dt_s: f64,
+    /// The time over which `v_prev` changes into `v` [s]: for two servo steps, the time
+    /// between the middles of their periods, (previous period + this one) / 2 (each implied
+    /// velocity is the mean over its own period); else `dt_s`.
+    dv_period_s: f64,
     acc_rad_s2: f64,
     q_from: Joints,
     v: Joints,
@@ -424,7 +430,7 @@ impl<R: Robot> Supervisor<R> {
                         input: MalformedInput::ServoParameter,
                     });
                 }
-                let (q_from, v_prev, dt) = match self.servo_ref {
+                let (q_from, v_prev, dt, dv_period) = match self.servo_ref {
                     Some(r) => {
                         let elapsed = self.state.timestamp_s - r.timestamp_s;
                         let dt = if elapsed.is_finite() {
@@ -432,14 +438,15 @@ impl<R: Robot> Supervisor<R> {
                         } else {
                             cycle
                         };
-                        (r.q, r.v, dt)
+                        (r.q, r.v, dt, 0.5 * (r.period_s + dt))
                     }
-                    None => (self.state.target_q, self.state.target_qd, cycle),
+                    None => (self.state.target_q, self.state.target_qd, cycle, cycle),
                 };
                 let v = map2(&q, &q_from, |a, b| (a - b) / dt);
                 Ok(Some(Motion {
                     servo: Some((lookahead_s, gain)),
                     dt_s: dt,
+                    dv_period_s: dv_period,
                     acc_rad_s2: self.config.joint_rates.max_acc_rad_s2(),
                     q_from,
                     v,
@@ -453,6 +460,7 @@ impl<R: Robot> Supervisor<R> {
                 Ok(Some(Motion {
                     servo: None,
                     dt_s: cycle,
+                    dv_period_s: cycle,
                     acc_rad_s2: acc,
                     q_from: self.state.actual_q,
                     v: qd,
@@ -474,7 +482,7 @@ impl<R: Robot> Supervisor<R> {
         let a_max = self.config.joint_rates.max_acc_rad_s2();
         let (cap_scale, cap_reason) = self.speed_cap_scale(motion, caps);
         let (scale, mut reason) = match motion.servo {
-            Some(_) => servo_scale(motion, cap_scale, cap_reason, a_max * dt)?,
+            Some(_) => servo_scale(motion, cap_scale, cap_reason, a_max * motion.dv_period_s)?,
             None => (cap_scale, cap_reason),
         };
         let v = map1(&motion.v, |x| x * scale);
@@ -499,6 +507,7 @@ impl<R: Robot> Supervisor<R> {
                     q: q_next,
                     v,
                     timestamp_s: self.state.timestamp_s,
+                    period_s: dt,
                 });
                 JointCommand::Servo {
                     q: q_next,

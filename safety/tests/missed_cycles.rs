@@ -246,14 +246,17 @@ fn saf_req_004_ramp_commanded_every_third_cycle_is_judged_over_the_elapsed_time(
     assert_eq!(rig.command_after(3, ramp.next()), Verdict::Passed);
 
     // Above the limit the true acceleration is judged: a ramp at 1.2 π rad/s² every 3rd cycle
-    // is reduced, and the violation reports 1.2 π (not 9 × 1.2 π).
+    // is reduced. Its first step changes the mean velocity from 0 (over the 2 ms of the start
+    // command) to 1.2 π · 0.006 = 0.022619 rad/s (over the next 6 ms): the two means are
+    // (2 + 6) / 2 = 4 ms apart, so the change reads 0.022619 / 0.004 = 5.655 rad/s² = 1.8 π
+    // (not 9 × 1.2 π as over one cycle).
     let mut rig = started();
     let mut ramp = Ramp::new(0.9 * PI, 1.2 * PI, 3);
     match rig.command_after(3, ramp.next()) {
         Verdict::Reduced {
             violation: Violation::JointAcceleration { value_rad_s2, .. },
             ..
-        } => assert!((value_rad_s2 - 1.2 * PI).abs() < 1e-6, "{value_rad_s2}"),
+        } => assert!((value_rad_s2 - 1.8 * PI).abs() < 1e-6, "{value_rad_s2}"),
         other => panic!("{other:?}"),
     }
 }
@@ -262,10 +265,11 @@ fn saf_req_004_ramp_commanded_every_third_cycle_is_judged_over_the_elapsed_time(
 fn saf_req_004_a_gap_longer_than_8_cycles_is_judged_as_8() {
     // Wrist 3 cruises at 0.5 π rad/s (every 3rd cycle), then 12 cycles pass and the next
     // command continues the motion: a step of 0.5 π · 0.024 = 0.037699 rad. Judged over 8
-    // cycles (16 ms) it implies 2.35619 rad/s = 0.75 π, a change of 0.25 π rad/s within 16 ms
-    // (49.1 rad/s²) from the previous 1.570796 rad/s: reduced to the largest scale the
-    // acceleration limit allows, s = (1.570796 + π · 0.016) / 2.35619 = 0.688000, a step of
-    // 0.688 · 2.35619 · 0.016 = 0.025937 rad. Judged over the real 24 ms it would have
+    // cycles (16 ms) it implies 2.35619 rad/s = 0.75 π, a change of 0.25 π rad/s from the
+    // previous 1.570796 rad/s between the middles of the two periods, (6 + 16) / 2 = 11 ms
+    // apart (71.4 rad/s²): reduced to the largest scale the acceleration limit allows,
+    // s = (1.570796 + π · 0.011) / 2.35619 = 0.681333, a step of
+    // 0.681333 · 2.35619 · 0.016 = 0.025686 rad. Judged over the real 24 ms it would have
     // passed (0.5 π rad/s, no change): a longer gap is judged conservatively.
     let mut rig = started();
     let mut ramp = Ramp::new(0.5 * PI, 0.5 * PI, 3);
@@ -284,12 +288,12 @@ fn saf_req_004_a_gap_longer_than_8_cycles_is_judged_as_8() {
             violation: Violation::JointAcceleration { joint, .. },
         } => {
             assert_eq!(joint, J);
-            assert!((scale - 0.688).abs() < 1e-6, "{scale}");
+            assert!((scale - 0.681_333).abs() < 1e-6, "{scale}");
         }
         other => panic!("{other:?}"),
     }
     let step = rig.sent()[J] - from[J];
-    assert!((step - 0.025_937).abs() < 1e-6, "{step}");
+    assert!((step - 0.025_686).abs() < 1e-6, "{step}");
     assert_eq!(rig.fired(Requirement::Saf004JointAcceleration), 1);
     assert_eq!(rig.fired(Requirement::Saf003JointSpeed), 0);
 }

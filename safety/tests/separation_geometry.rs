@@ -91,7 +91,9 @@ fn exposed_surface_point(
     let axis: Point3 = std::array::from_fn(|i| c.b_m[i] - c.a_m[i]);
     let (u, v) = perpendiculars(&axis);
     let out = c.radius_m + offset_m;
-    let wanted = offset_m + 0.01;
+    // (1 nm of tolerance: at the part's far pole the gap is exactly 1 cm by construction —
+    // part 0.03 m + radius 0.04 m beyond the fingertips, the gripper's cap 0.06 m.)
+    let wanted = offset_m + 0.01 - 1e-9;
     let best_of = |candidates: &mut dyn Iterator<Item = (Point3, Point3)>| {
         candidates
             .map(|(p, n)| (others_distance(caps, k, &p), p, n))
