@@ -594,6 +594,8 @@ pub struct Controller {
     settled_since_s: Option<f64>,
     /// The time scale's target held since a reduction: (target [-], since [s]).
     held_target: Option<(f64, f64)>,
+    /// After a supervisor stop: brake to rest before re-synchronising.
+    brake_first: bool,
     report: ScaleReport,
     stats: ControllerStats,
 }
@@ -634,6 +636,7 @@ impl Controller {
             last_now_s: None,
             settled_since_s: None,
             held_target: None,
+            brake_first: false,
             report: ScaleReport {
                 scale: 1.0,
                 target: 1.0,
@@ -739,11 +742,19 @@ impl Controller {
         &self.stats
     }
 
-    /// Tells the controller that its last command was not executed as sent (the safety
-    /// supervisor reduced it or replaced it by a stop): the next step re-synchronises to the
-    /// robot's target state and re-plans from there, so the motion continues smoothly from
-    /// where the robot really is instead of fighting the supervisor.
+    /// Tells the controller that its last command was replaced by a stop (the safety
+    /// supervisor stopped or halted the robot): the next steps let the robot finish braking,
+    /// then re-synchronise to its target state and re-plan from rest, so the motion continues
+    /// from where the robot really is instead of fighting the supervisor.
     pub fn command_overridden(&mut self) {
+        self.synced = false;
+        self.brake_first = true;
+    }
+
+    /// Tells the controller that its last command was sent scaled down (the supervisor reduced
+    /// it): the next step re-synchronises to the robot's target state and re-plans from there
+    /// while it moves, without braking first (a reduction is no stop).
+    pub fn command_reduced(&mut self) {
         self.synced = false;
     }
 
@@ -858,7 +869,11 @@ impl Controller {
         // having to ramp down to it.
         let mut from_rest = false;
         if !self.synced {
-            if state.target_qd.iter().any(|v| v.abs() > REST_SPEED_RAD_S) {
+            let moving = state.target_qd.iter().any(|v| v.abs() > REST_SPEED_RAD_S);
+            if !moving {
+                self.brake_first = false;
+            }
+            if moving && self.brake_first {
                 // Overridden while moving: let the robot finish braking (our own stop, at the
                 // supervisor's deceleration) and resume from rest, instead of re-accelerating
                 // into the limit that just stopped it.

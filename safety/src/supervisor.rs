@@ -82,7 +82,9 @@ impl SafeCommand {
 struct ServoReference {
     q: Joints,
     v: Joints,
-    /// Controller timestamp of the state the command was judged on [s].
+    /// Controller time the command stands for [s]: the timestamp of the state it was judged
+    /// on, or one cycle after the previous command's if that state was not newer (a cycle run
+    /// on a held state is still a cycle).
     timestamp_s: f64,
     /// The period that command covered [s] (its `v` is the mean velocity over it).
     period_s: f64,
@@ -100,6 +102,8 @@ struct Motion {
     /// between the middles of their periods, (previous period + this one) / 2 (each implied
     /// velocity is the mean over its own period); else `dt_s`.
     dv_period_s: f64,
+    /// The controller time this command stands for [s] (see `ServoReference::timestamp_s`).
+    ref_timestamp_s: f64,
     acc_rad_s2: f64,
     q_from: Joints,
     v: Joints,
@@ -430,23 +434,31 @@ impl<R: Robot> Supervisor<R> {
                         input: MalformedInput::ServoParameter,
                     });
                 }
-                let (q_from, v_prev, dt, dv_period) = match self.servo_ref {
+                let (q_from, v_prev, dt, dv_period, ref_ts) = match self.servo_ref {
                     Some(r) => {
-                        let elapsed = self.state.timestamp_s - r.timestamp_s;
+                        let ref_ts = self.state.timestamp_s.max(r.timestamp_s + cycle);
+                        let elapsed = ref_ts - r.timestamp_s;
                         let dt = if elapsed.is_finite() {
                             elapsed.clamp(cycle, MAX_COMMAND_PERIOD_CYCLES * cycle)
                         } else {
                             cycle
                         };
-                        (r.q, r.v, dt, 0.5 * (r.period_s + dt))
+                        (r.q, r.v, dt, 0.5 * (r.period_s + dt), ref_ts)
                     }
-                    None => (self.state.target_q, self.state.target_qd, cycle, cycle),
+                    None => (
+                        self.state.target_q,
+                        self.state.target_qd,
+                        cycle,
+                        cycle,
+                        self.state.timestamp_s,
+                    ),
                 };
                 let v = map2(&q, &q_from, |a, b| (a - b) / dt);
                 Ok(Some(Motion {
                     servo: Some((lookahead_s, gain)),
                     dt_s: dt,
                     dv_period_s: dv_period,
+                    ref_timestamp_s: ref_ts,
                     acc_rad_s2: self.config.joint_rates.max_acc_rad_s2(),
                     q_from,
                     v,
@@ -461,6 +473,7 @@ impl<R: Robot> Supervisor<R> {
                     servo: None,
                     dt_s: cycle,
                     dv_period_s: cycle,
+                    ref_timestamp_s: self.state.timestamp_s,
                     acc_rad_s2: acc,
                     q_from: self.state.actual_q,
                     v: qd,
@@ -506,7 +519,7 @@ impl<R: Robot> Supervisor<R> {
                 self.servo_ref = Some(ServoReference {
                     q: q_next,
                     v,
-                    timestamp_s: self.state.timestamp_s,
+                    timestamp_s: motion.ref_timestamp_s,
                     period_s: dt,
                 });
                 JointCommand::Servo {

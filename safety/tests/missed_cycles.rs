@@ -297,3 +297,34 @@ fn saf_req_004_a_gap_longer_than_8_cycles_is_judged_as_8() {
     assert_eq!(rig.fired(Requirement::Saf004JointAcceleration), 1);
     assert_eq!(rig.fired(Requirement::Saf003JointSpeed), 0);
 }
+
+#[test]
+fn saf_req_004_a_cycle_run_on_a_held_state_still_counts_as_a_cycle() {
+    // Wrist 3 ramps at 0.5 π rad/s² to 0.9 π rad/s, one command per cycle. Once, the state
+    // is not renewed (the RTDE sample is late): the runtime runs that cycle on the held state
+    // and commands the next 2 ms step; the state after it is 2 cycles newer than the one
+    // before. Each command stands for one cycle: the held one for the held timestamp + 2 ms,
+    // the next for the new timestamp, 2 ms later — steps of one cycle each, no acceleration
+    // jump. (Timing the held one at the held timestamp, as before, read the next step as one
+    // cycle of motion over 4 ms: its mean velocity halved, a change of ≈ 0.45 π rad/s within
+    // 2 ms ≈ 700 rad/s², which the supervisor met by stretching that step.)
+    let mut rig = started();
+    let mut ramp = Ramp::new(0.9 * PI, 0.5 * PI, 1);
+    for _ in 0..1000 {
+        assert_eq!(rig.command_after(1, ramp.next()), Verdict::Passed);
+    }
+    assert!((ramp.v - 0.9 * PI).abs() < 1e-12, "cruising: {}", ramp.v);
+    // Each command goes out exactly as asked (no verdict, and no silent change either: the
+    // old timing made the supervisor stretch the next step by ≈ 2 to keep its deceleration
+    // within π rad/s², which it reports as Passed).
+    for (cycles, what) in [(0, "held state"), (2, "after it"), (1, "next"), (1, "next")] {
+        let q = ramp.next();
+        assert_eq!(rig.command_after(cycles, q), Verdict::Passed, "{what}");
+        assert!(
+            (rig.sent()[J] - q[J]).abs() < 1e-12,
+            "{what}: sent {:?}, asked {q:?}",
+            rig.sent()
+        );
+    }
+    assert_eq!(rig.fired(Requirement::Saf004JointAcceleration), 0);
+}

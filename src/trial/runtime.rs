@@ -1100,43 +1100,22 @@ fn drive<R: TrialRobot>(
                 }
             }
             world.now_s = t;
-            world.human = robot_io::geometry::HumanBody {
-                head_m: humans.head_m,
-                left_hand_m: humans.left_hand_m,
-                right_hand_m: humans.right_hand_m,
-                torso: None,
-            };
+            // The supervisor watches the same tracked body as the planner, torso included.
+            world.human = humans;
             world.perception_age_s = (t - last_cue_t).max(0.0);
             world.collaborating = controller.collaborating();
             let verdict = supervisor.step(&cmd, &world);
-            if std::env::var("HRC_DEBUG_FROM")
-                .ok()
-                .and_then(|v| v.parse::<f64>().ok())
-                .is_some_and(|f| t >= f && t < f + 0.6)
-            {
-                let r = controller.scale_report();
-                let v = state.actual_tcp_speed;
-                eprintln!(
-                    "DBG t={t:.3} {:?} {:?} s={:.3} tgt={:.3} now={:.3} {:?} d={:.3} tcp={:.4}",
-                    controller.phase(),
-                    verdict.requirement(),
-                    r.scale,
-                    r.target,
-                    r.admissible_now,
-                    r.binding,
-                    r.min_distance_m,
-                    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
-                );
-            }
             // A command the supervisor changed was not executed as planned: the controller
-            // re-plans from the measured joints (a reduction by rounding alone does not count).
-            let overridden = match &verdict {
-                Verdict::Passed => false,
-                Verdict::Reduced { scale, .. } => *scale < 1.0 - 1e-6,
-                Verdict::Stopped { .. } | Verdict::Halted { .. } => true,
-            };
-            if overridden {
-                controller.command_overridden();
+            // re-plans from the robot's state (a reduction by rounding alone does not count);
+            // after a stop it first lets the robot come to rest.
+            match &verdict {
+                Verdict::Passed => {}
+                Verdict::Reduced { scale, .. } => {
+                    if *scale < 1.0 - 1e-6 {
+                        controller.command_reduced();
+                    }
+                }
+                Verdict::Stopped { .. } | Verdict::Halted { .. } => controller.command_overridden(),
             }
             let pair = (
                 verdict_kind(&verdict),

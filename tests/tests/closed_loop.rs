@@ -236,14 +236,15 @@ impl Loop {
             collaborating: self.ctl.collaborating(),
         };
         let verdict = self.sup.step(&self.cmd, &world);
-        // As the runtime: a reduction by rounding alone does not count as an override.
-        let overridden = match verdict {
-            Verdict::Passed => false,
-            Verdict::Reduced { scale, .. } => scale < 1.0 - 1e-6,
-            Verdict::Stopped { .. } | Verdict::Halted { .. } => true,
-        };
-        if overridden {
-            self.ctl.command_overridden();
+        // As the runtime: a reduction by rounding alone does not count; a stop brakes first.
+        match verdict {
+            Verdict::Passed => {}
+            Verdict::Reduced { scale, .. } => {
+                if scale < 1.0 - 1e-6 {
+                    self.ctl.command_reduced();
+                }
+            }
+            Verdict::Stopped { .. } | Verdict::Halted { .. } => self.ctl.command_overridden(),
         }
         self.cycles.push(Cycle {
             t: now,
