@@ -3,8 +3,9 @@
 //! This library holds only helpers that the crates' own tests share: locating the data bundled
 //! in the repository's `data/` folder and its `config/` folder, and a counting allocator. Each
 //! crate's own tests live in that crate (`<crate>/tests/`); cross-crate closed-loop tests belong
-//! in `tests/tests/`. There are none there yet: the closed-loop trial tests need the trial
-//! runtime, which is still in the `hrc-adapt` binary (ARCHITECTURE.md, "Where the tests live").
+//! in `tests/tests/`: `closed_loop.rs` wires `adapt::Controller` through `safety::Supervisor` to
+//! `SimRobot` as the trial runtime does. Whole-trial tests need the trial runtime, which is still
+//! in the `hrc-adapt` binary (ARCHITECTURE.md, "Where the tests live").
 
 use std::path::PathBuf;
 
