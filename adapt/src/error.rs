@@ -71,3 +71,27 @@ pub enum AdaptError {
 
 /// Result alias of this crate.
 pub type Result<T, E = AdaptError> = std::result::Result<T, E>;
+
+/// `v` if it is finite and > 0, else [`AdaptError::InvalidValue`] naming `key` and the value.
+pub(crate) fn positive(key: &str, v: f64) -> Result<f64> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(AdaptError::InvalidValue {
+            key: key.to_owned(),
+            rule: format!("must be finite and > 0, got {v}"),
+        })
+    }
+}
+
+/// `v` if it is finite and ≥ 0, else [`AdaptError::InvalidValue`] naming `key` and the value.
+pub(crate) fn non_negative(key: &str, v: f64) -> Result<f64> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(AdaptError::InvalidValue {
+            key: key.to_owned(),
+            rule: format!("must be finite and >= 0, got {v}"),
+        })
+    }
+}

@@ -45,6 +45,7 @@ use rsruckig::prelude::{
     ThrowErrorHandler, Trajectory,
 };
 
+use crate::error::positive;
 use crate::otg::{DOF, MotionLimits, UR5E_CYCLE_S};
 use crate::{AdaptError, Result};
 
@@ -310,15 +311,10 @@ impl ScaleLimits {
     /// # Errors
     /// [`AdaptError::InvalidValue`] unless both are finite and > 0.
     pub fn new(rate: f64, accel: f64) -> Result<ScaleLimits> {
-        for (key, v) in [("scale_rate", rate), ("scale_accel", accel)] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(AdaptError::InvalidValue {
-                    key: key.to_owned(),
-                    rule: format!("must be finite and > 0, got {v}"),
-                });
-            }
-        }
-        Ok(ScaleLimits { rate, accel })
+        Ok(ScaleLimits {
+            rate: positive("scale_rate", rate)?,
+            accel: positive("scale_accel", accel)?,
+        })
     }
 
     /// ṡ_max [1/s].

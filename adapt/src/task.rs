@@ -49,6 +49,7 @@ use std::fmt;
 use robot_io::Joints;
 use serde::Deserialize;
 
+use crate::error::{non_negative, positive};
 use crate::{AdaptError, Result};
 
 /// The phases of a handover (see the module docs for the transitions).
@@ -370,7 +371,8 @@ impl TaskConfig {
             ));
         }
         non_negative("grip_dwell_s", self.grip_dwell_s)?;
-        non_negative("release_dwell_s", self.release_dwell_s)
+        non_negative("release_dwell_s", self.release_dwell_s)?;
+        Ok(())
     }
 
     /// Validate a raw config, solving Cartesian poses with `solve_ik(pose, seed)`, which returns
@@ -464,22 +466,6 @@ fn check_joints(key: &'static str, q: &Joints) -> Result<()> {
             key,
             format!("joints must be finite and within ±2π rad, got {q:?}"),
         ))
-    }
-}
-
-fn positive(key: &'static str, v: f64) -> Result<()> {
-    if v.is_finite() && v > 0.0 {
-        Ok(())
-    } else {
-        Err(invalid(key, format!("must be finite and > 0, got {v}")))
-    }
-}
-
-fn non_negative(key: &'static str, v: f64) -> Result<()> {
-    if v.is_finite() && v >= 0.0 {
-        Ok(())
-    } else {
-        Err(invalid(key, format!("must be finite and >= 0, got {v}")))
     }
 }
 

@@ -242,3 +242,14 @@ impl RobotIoError {
 
 /// Result alias of this crate.
 pub type Result<T, E = RobotIoError> = std::result::Result<T, E>;
+
+/// `v` if it is finite and > 0 (`strict`) or ≥ 0, else the rule it breaks (for the
+/// structured config errors, which name the field).
+pub(crate) fn finite_bound(v: f64, strict: bool) -> std::result::Result<f64, &'static str> {
+    match (v.is_finite(), strict) {
+        (true, true) if v > 0.0 => Ok(v),
+        (true, false) if v >= 0.0 => Ok(v),
+        (_, true) => Err("must be finite and > 0"),
+        (_, false) => Err("must be finite and >= 0"),
+    }
+}

@@ -66,7 +66,7 @@ use std::fmt;
 use nalgebra::{Isometry3, Point3 as NaPoint3};
 use serde::Deserialize;
 
-use crate::error::{Result, RobotIoError};
+use crate::error::{Result, RobotIoError, finite_bound};
 use crate::kinematics::{FRAME_COUNT, UR5E_DH_A, UR5E_DH_D, link_frames};
 use crate::types::Joints;
 
@@ -355,19 +355,11 @@ fn geometry_err<T>(field: &'static str, reason: &'static str) -> Result<T> {
 }
 
 fn radius(field: &'static str, v: f64) -> Result<f64> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        geometry_err(field, "must be finite and > 0")
-    }
+    finite_bound(v, true).or_else(|reason| geometry_err(field, reason))
 }
 
 fn length(field: &'static str, v: f64) -> Result<f64> {
-    if v.is_finite() && v >= 0.0 {
-        Ok(v)
-    } else {
-        geometry_err(field, "must be finite and >= 0")
-    }
+    finite_bound(v, false).or_else(|reason| geometry_err(field, reason))
 }
 
 impl ArmModel {

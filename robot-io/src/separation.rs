@@ -31,7 +31,7 @@
 //! assert!((s - 0.37).abs() < 1e-12);
 //! ```
 
-use crate::error::{Result, RobotIoError};
+use crate::error::{Result, RobotIoError, finite_bound};
 use crate::geometry::BodyPart;
 
 fn invalid<T>(field: &'static str, reason: &'static str) -> Result<T> {
@@ -39,19 +39,11 @@ fn invalid<T>(field: &'static str, reason: &'static str) -> Result<T> {
 }
 
 fn finite_positive(field: &'static str, value: f64) -> Result<f64> {
-    if value.is_finite() && value > 0.0 {
-        Ok(value)
-    } else {
-        invalid(field, "must be finite and > 0")
-    }
+    finite_bound(value, true).or_else(|reason| invalid(field, reason))
 }
 
 fn finite_non_negative(field: &'static str, value: f64) -> Result<f64> {
-    if value.is_finite() && value >= 0.0 {
-        Ok(value)
-    } else {
-        invalid(field, "must be finite and >= 0")
-    }
+    finite_bound(value, false).or_else(|reason| invalid(field, reason))
 }
 
 /// Validated ISO/TS 15066 parameters: v_h for the head and torso (walking) [m/s], v_h for the
