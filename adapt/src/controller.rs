@@ -69,7 +69,7 @@
 use std::time::Duration;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-use robot_io::geometry::{ARM_CAPSULES, BodyPart, HumanBody, Torso};
+use robot_io::geometry::{BodyPart, HumanBody, Torso};
 use robot_io::kinematics::{ControlPoints, control_points, control_points_zeroed};
 use robot_io::{JointCommand, Joints, RobotState, robot_mode, runtime_state};
 use serde::Deserialize;
@@ -498,14 +498,20 @@ impl TrackedPoint {
         }
     }
 
+    /// Whether the point is extrapolated along its velocity (perception jitter is not motion:
+    /// below the dead band the point is taken as still).
+    fn extrapolates(&self) -> bool {
+        let v = self.velocity;
+        self.last.is_some()
+            && (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() >= VELOCITY_DEAD_BAND_M_S
+    }
+
     fn predict(&self, h_s: f64) -> Option<[f64; 3]> {
         let v = self.velocity;
-        let speed = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-        // Perception jitter is not motion: below the dead band the point is taken as still.
-        let h = if speed < VELOCITY_DEAD_BAND_M_S {
-            0.0
-        } else {
+        let h = if self.extrapolates() {
             h_s.clamp(0.0, PREDICTION_HORIZON_S)
+        } else {
+            0.0
         };
         self.last
             .map(|p| [p[0] + v[0] * h, p[1] + v[1] * h, p[2] + v[2] * h])
@@ -513,6 +519,11 @@ impl TrackedPoint {
 }
 
 impl HumanTracker {
+    /// Whether any point is extrapolated (else every prediction is the body as it is now).
+    fn any_extrapolated(&self) -> bool {
+        self.points.iter().any(TrackedPoint::extrapolates)
+    }
+
     fn update(&mut self, body: &HumanBody, now: f64, envelope: &SafetyEnvelope) {
         let sep = envelope.separation();
         let [head, left, right, torso] = &mut self.points;
@@ -730,11 +741,6 @@ impl Controller {
     /// The control points (TCP, wrist, elbow) of the last step, at the measured joints.
     pub fn control_points(&self) -> &ControlPoints {
         &self.points
-    }
-
-    /// The arm's capsules at joints `q` [rad] under the envelope's arm model.
-    pub fn arm_capsules(&self, q: &Joints, out: &mut [robot_io::geometry::Capsule; ARM_CAPSULES]) {
-        self.cfg.envelope.arm().capsules(q, out);
     }
 
     /// Counters since construction.
@@ -1147,6 +1153,8 @@ impl Controller {
         let horizon = (limits.full_stop_s() * 1.25).clamp(0.25, 2.0);
         let tau0 = self.scale.tau();
         let now_body = self.humans.effective(humans);
+        // With no point extrapolated, the predicted body is the body now: evaluate it once.
+        let moving = self.humans.any_extrapolated();
         let mut target = 1.0_f64;
         let mut binding = Binding::None;
         for k in 0..=LOOKAHEAD_SAMPLES {
@@ -1155,13 +1163,13 @@ impl Controller {
             self.path.sample(tau0 + h, &mut self.lookahead);
             // The operator as now and as predicted along their velocity, whichever binds: a
             // point moving away is never counted on.
-            let body = self.humans.predict(h);
             let q = self.lookahead.position;
             let qd = self.lookahead.velocity;
             let mut a = self
                 .envelope
                 .admissible_scale(&q, &qd, &now_body, age, collaborating);
-            if k > 0 {
+            if k > 0 && moving {
+                let body = self.humans.predict(h);
                 let p = self
                     .envelope
                     .admissible_scale(&q, &qd, &body, age, collaborating);

@@ -49,6 +49,7 @@ use robot_io::kinematics::flange_pose;
 use robot_io::separation::{SeparationParams, protective_distance_m};
 use serde::Deserialize;
 
+use crate::error::positive;
 use crate::{AdaptError, Result};
 
 /// The supervisor's limits as the planner must respect them (all validated: finite, > 0 where
@@ -66,17 +67,6 @@ pub struct SafetyEnvelope {
     separation: SeparationParams,
     arm: ArmModel,
     body: BodyModel,
-}
-
-fn positive(key: &str, v: f64) -> Result<f64> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(AdaptError::InvalidValue {
-            key: key.to_owned(),
-            rule: format!("must be finite and > 0, got {v}"),
-        })
-    }
 }
 
 impl SafetyEnvelope {
@@ -437,6 +427,11 @@ impl Envelope {
                 Binding::TcpSpeed,
                 &mut best,
             );
+        }
+        if !BodyPart::ALL.iter().any(|p| body.tracks(*p)) {
+            // Nobody tracked: no separation limit (and no capsule to compute).
+            best.scale = best.scale.clamp(0.0, 1.0);
+            return best;
         }
         // Separation: distances now and at the supervisor's stopping configuration (for the
         // current scale bound, at which the robot would run).
