@@ -335,6 +335,54 @@ fn synthetic_bag_plays_every_frame_with_aligned_depth_and_true_colours() {
     assert!(checked > 5 * 100, "only {checked} depth pixels checked");
 }
 
+/// A reader that waits before its first frame and between frames, longer than the whole
+/// recording lasts in real time (5 frames at 30 fps: 133 ms), still gets every frame with its
+/// depth: playback waits for the reader.
+///
+/// (The CI failure of 2026-12 — a colour frame without depth — came from the earlier design,
+/// which started playback in real time and switched it from its first frame: a 20 ms stall
+/// between the two, injected by hand, reproduced it every time. The present design never plays
+/// in real time, so there is no such window left to provoke from a test.)
+#[test]
+fn a_slow_reader_loses_no_frame_and_no_depth_of_a_bag() {
+    let scene = Scene::load();
+    let expected = scene.json.at("frames").f() as usize;
+    let mut source =
+        RealSenseSource::open_bag(bag_dir().join("synthetic_plane.bag")).expect("open the bag");
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let mut frames = Vec::new();
+    while let Some(frame) = source.next_frame().expect("a frame or the end") {
+        frames.push(frame);
+        assert!(frames.len() <= expected, "more frames than recorded");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    assert_eq!(frames.len(), expected);
+    for (k, frame) in frames.iter().enumerate() {
+        assert_eq!(frame.index, k as u64);
+        assert!(frame.depth.is_some(), "frame {k} has no depth");
+    }
+    assert_eq!(source.frames_without_depth(), 0);
+}
+
+/// Closing a `.bag` source mid-file, while the playback waits for the reader, releases it
+/// (the playback thread is blocked handing over a frame until the reader is gone).
+#[test]
+fn a_bag_source_closed_mid_file_lets_go() {
+    for read in [0, 1, 2] {
+        let mut source =
+            RealSenseSource::open_bag(bag_dir().join("synthetic_plane.bag")).expect("open");
+        for _ in 0..read {
+            assert!(source.next_frame().expect("a frame").is_some());
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        drop(source);
+    }
+    // And the file can be opened again afterwards.
+    let mut source =
+        RealSenseSource::open_bag(bag_dir().join("synthetic_plane.bag")).expect("open");
+    assert!(source.next_frame().expect("a frame").is_some());
+}
+
 #[test]
 fn depth_is_aligned_to_colour_not_raw() {
     // The depth camera sits beside the colour camera; unaligned depth would be shifted by

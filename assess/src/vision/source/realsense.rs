@@ -10,27 +10,30 @@
 //!   intrinsics, and the colour pixels between them get the point's colour-camera z (the nearest
 //!   surface wins where several land) — librealsense2's own algorithm (`align_z_to_other`).
 //!   The align block only aligns the depth frame the pipeline's syncer happened to put next to
-//!   a colour frame, and in `.bag` playback the syncer sometimes pairs a colour frame with the
-//!   *next* depth frame; aligning ourselves lets us pair each colour frame with the depth frame
-//!   of the same timestamp (within half a frame period). Distortion is not modelled: the D435i
+//!   a colour frame, and the syncer sometimes pairs a colour frame with the *next* depth frame;
+//!   aligning ourselves lets us pair each colour frame with the depth frame nearest its
+//!   timestamp (within half a frame period). Distortion is not modelled: the D435i
 //!   reports zero coefficients for both streams, and a stream with non-zero ones is refused.
 //! - **Depth scale** [m per unit] is the depth sensor's `DEPTH_UNITS` option (0.001 on a
 //!   D435i by default), read once when the stream starts.
 //! - **Intrinsics** are the colour stream's (fx, fy, ppx, ppy). The D435i colour stream is
 //!   rectified with (inverse) Brown–Conrady coefficients that are zero, so the pinhole model of
 //!   [`Intrinsics`] is exact.
-//! - **Time**: [`CameraFrame::t`] is the colour frame's camera timestamp [ms] / 1000 [s]. The
-//!   pipeline's frame syncer hands out the same colour frame more than once (once per new depth
+//! - **Time**: [`CameraFrame::t`] is the colour frame's camera timestamp [ms] / 1000 [s]. A live
+//!   camera's frame syncer hands out the same colour frame more than once (once per new depth
 //!   frame); a colour frame whose timestamp does not increase is skipped and counted
 //!   ([`RealSenseSource::skipped_duplicates`]), so `t` is strictly increasing. A colour frame
 //!   with no depth frame within half a frame period gets `depth: None` and is counted
 //!   ([`RealSenseSource::frames_without_depth`]).
-//! - **`.bag` playback** is not real time: librealsense2 waits for each frame to be consumed, so
-//!   no frame is dropped however slow the consumer is. The end of the file is `Ok(None)`.
+//! - **`.bag` playback** is never real time: the file is loaded as a playback device, switched
+//!   to non-real-time before it plays a frame, and its colour and depth sensors hand their
+//!   frames to a bounded queue that the playback waits on, so no frame is dropped however slow
+//!   the consumer is, and frames come in file order (no frame syncer). The end of the file is
+//!   `Ok(None)`.
 //!
-//! realsense-rust 1.3 does not expose the playback device (real-time switch, status), so this
-//! module declares those few librealsense2 C functions itself (see `playback`); they are in the
-//! same library realsense-sys links.
+//! realsense-rust 1.3 does not expose the playback device (real-time switch, status) nor raw
+//! handles, so `.bag` playback is written against librealsense2's C API (realsense-sys, the
+//! same library realsense-rust links; see `playback`).
 //!
 //! ```no_run
 //! use assess::vision::FrameSource;
@@ -63,8 +66,10 @@ use realsense_rust::context::Context;
 use realsense_rust::device::Device;
 use realsense_rust::frame::{ColorFrame, CompositeFrame, DepthFrame, PixelKind};
 use realsense_rust::kind::{Rs2CameraInfo, Rs2Format, Rs2Option, Rs2StreamKind};
-use realsense_rust::pipeline::{ActivePipeline, FrameWaitError, InactivePipeline};
+use realsense_rust::pipeline::{ActivePipeline, InactivePipeline};
 use realsense_rust::prelude::FrameEx;
+use realsense_rust::sensor::Sensor;
+use realsense_rust::stream_profile::StreamProfile;
 
 use super::FrameSource;
 use nalgebra::{Matrix3, Point3, Vector3};
@@ -190,21 +195,15 @@ pub struct RealSenseSource {
     name: String,
     /// A one-line description for logs.
     description: String,
-    pipeline: ActivePipeline,
+    stream: Stream,
     /// Depth → colour geometry for the alignment.
     aligner: Aligner,
-    /// The playback device of a `.bag` source (`None` for cameras).
-    playback: Option<playback::Playback>,
-    /// Whether this is a `.bag` source.
-    is_bag: bool,
     intrinsics: Intrinsics,
     depth_scale_m: f64,
     /// Half the nominal frame period [ms]: the largest colour–depth timestamp gap of a pair.
     pair_tolerance_ms: f64,
-    /// Timestamp of the newest colour frame taken from the pipeline [ms].
+    /// Timestamp of the last colour frame handed out [ms].
     last_color_ms: Option<f64>,
-    /// Timestamp of the newest depth frame taken from the pipeline [ms].
-    last_depth_ms: Option<f64>,
     /// Colour frames waiting for their depth frame, oldest first.
     pending: VecDeque<PendingColor>,
     /// Recent depth frames, oldest first.
@@ -290,7 +289,7 @@ impl RealSenseSource {
             "RealSense {} {} ({}x{} px, {} fps)",
             chosen.name, chosen.serial, config.width, config.height, config.fps
         );
-        Self::from_pipeline(name, description, pipeline, false)
+        Self::from_pipeline(name, description, Stream::Camera(pipeline))
     }
 
     /// Opens a `.bag` recording (made by the RealSense Viewer, `rs-record`, or a recorder) for
@@ -306,118 +305,48 @@ impl RealSenseSource {
         if !path.is_file() {
             return Err(cannot("no such file".to_string()));
         }
-        let context = new_context(&name)?;
-        let mut rs_config = Config::new();
-        rs_config
-            .enable_device_from_file(&path, false)
-            .map_err(|e| cannot(e.to_string()))?;
-        rs_config
-            .enable_stream(Rs2StreamKind::Color, None, 0, 0, Rs2Format::Any, 0)
-            .and_then(|c| c.enable_stream(Rs2StreamKind::Depth, None, 0, 0, Rs2Format::Any, 0))
-            .map_err(|e| cannot(e.to_string()))?;
-        let pipeline = InactivePipeline::try_from(&context)
-            .map_err(|e| cannot(format!("cannot create a pipeline: {e}")))?;
-        let pipeline = pipeline
-            .start(Some(rs_config))
-            .map_err(|e| cannot(format!("{e} (does it hold a colour and a depth stream?)")))?;
+        let bag = playback::BagPlayer::open(&path, cannot)?;
         let description = format!("RealSense recording {name}");
-        let mut source = Self::from_pipeline(name, description, pipeline, true)?;
-        // Switch the playback to non-real-time now, not at the first `next_frame`: a caller
-        // that loads models between opening and reading (half a second) would otherwise find
-        // the whole recording played past in real time.
-        while source.playback.is_none() && !source.ended {
-            match source.wait_frameset()? {
-                Some(frames) => source.ingest(&frames)?,
-                None => source.ended = true,
-            }
-        }
-        Ok(source)
+        Self::from_pipeline(name, description, Stream::Bag(bag))
     }
 
     /// Reads what every source needs from a started pipeline.
-    fn from_pipeline(
-        name: String,
-        description: String,
-        pipeline: ActivePipeline,
-        is_bag: bool,
-    ) -> Result<Self> {
-        let profile = pipeline.profile();
-        let color = profile
-            .streams()
-            .iter()
-            .find(|s| s.kind() == Rs2StreamKind::Color)
-            .ok_or_else(|| source_error(&name, "the device has no colour stream"))?;
-        let color_format = color.format();
-        if !matches!(
-            color_format,
-            Rs2Format::Rgb8 | Rs2Format::Bgr8 | Rs2Format::Rgba8 | Rs2Format::Bgra8
-        ) {
-            return Err(source_error(
-                &name,
-                format!(
-                    "colour format {color_format:?} is not supported (RGB8, BGR8, RGBA8, BGRA8 are)"
-                ),
-            ));
-        }
-        let fps = color.framerate();
-        let ci = color
-            .intrinsics()
-            .map_err(|e| source_error(&name, format!("cannot read the colour intrinsics: {e}")))?;
-        let intrinsics = pinhole(&ci, "colour", &name)?;
-        let depth = profile
-            .streams()
-            .iter()
-            .find(|s| s.kind() == Rs2StreamKind::Depth)
-            .ok_or_else(|| source_error(&name, "the device has no depth stream"))?;
-        if depth.format() != Rs2Format::Z16 {
-            return Err(source_error(
-                &name,
-                format!(
-                    "depth format {:?} is not supported (Z16 is)",
-                    depth.format()
-                ),
-            ));
-        }
-        let di = depth
-            .intrinsics()
-            .map_err(|e| source_error(&name, format!("cannot read the depth intrinsics: {e}")))?;
-        let depth_intrinsics = pinhole(&di, "depth", &name)?;
-        let ext = depth.extrinsics(color).map_err(|e| {
-            source_error(
-                &name,
-                format!("cannot read the depth-to-colour extrinsics: {e}"),
-            )
-        })?;
-        // librealsense2 stores the rotation column-major.
-        let r = ext.rotation().map(f64::from);
-        let t = ext.translation().map(f64::from);
-        let aligner = Aligner {
-            depth: depth_intrinsics,
-            color: intrinsics,
-            rotation: Matrix3::from_column_slice(&r),
-            translation: Vector3::new(t[0], t[1], t[2]),
-        };
-        // The depth sensor is the one with a DEPTH_UNITS option.
-        let depth_scale_m = profile
-            .device()
-            .sensors()
-            .iter()
-            .find_map(|s| s.get_option(Rs2Option::DepthUnits))
-            .map(f64::from)
-            .filter(|s| s.is_finite() && *s > 0.0)
-            .ok_or_else(|| {
-                source_error(
+    fn from_pipeline(name: String, description: String, stream: Stream) -> Result<Self> {
+        let setup = match &stream {
+            Stream::Camera(pipeline) => {
+                let profile = pipeline.profile();
+                let find = |kind: Rs2StreamKind, what: &str| {
+                    profile
+                        .streams()
+                        .iter()
+                        .find(|s| s.kind() == kind)
+                        .ok_or_else(|| {
+                            source_error(&name, format!("the device has no {what} stream"))
+                        })
+                };
+                StreamSetup::read(
                     &name,
-                    "the device reports no depth scale (DEPTH_UNITS option)",
-                )
-            })?;
+                    find(Rs2StreamKind::Color, "colour")?,
+                    find(Rs2StreamKind::Depth, "depth")?,
+                    &profile.device().sensors(),
+                )?
+            }
+            Stream::Bag(bag) => {
+                let (color, depth) = bag.profiles(&name)?;
+                StreamSetup::read(&name, &color, &depth, &bag.sensors(&name)?)?
+            }
+        };
+        let StreamSetup {
+            intrinsics,
+            aligner,
+            depth_scale_m,
+            fps,
+        } = setup;
         Ok(Self {
             name,
             description,
-            pipeline,
+            stream,
             aligner,
-            playback: None,
-            is_bag,
             intrinsics,
             depth_scale_m,
             pair_tolerance_ms: if fps > 0 {
@@ -426,7 +355,6 @@ impl RealSenseSource {
                 500.0 / 30.0
             },
             last_color_ms: None,
-            last_depth_ms: None,
             pending: VecDeque::new(),
             depths: VecDeque::new(),
             next_index: 0,
@@ -435,7 +363,6 @@ impl RealSenseSource {
             ended: false,
         })
     }
-
     /// The colour camera's intrinsics (those of every frame).
     pub fn intrinsics(&self) -> Intrinsics {
         self.intrinsics
@@ -456,50 +383,144 @@ impl RealSenseSource {
         self.frames_without_depth
     }
 
-    /// The next frameset from the pipeline; `None` at the end of a `.bag` file.
-    fn wait_frameset(&mut self) -> Result<Option<CompositeFrame>> {
-        if !self.is_bag {
-            return self
-                .pipeline
-                .wait(Some(LIVE_TIMEOUT))
-                .map(Some)
-                .map_err(|e| source_error(&self.name, format!("no frame from the camera: {e}")));
-        }
+    /// The next input from the camera or the file; `None` at the end of a `.bag` file.
+    fn wait_input(&mut self) -> Result<Option<Input>> {
+        let bag = match &mut self.stream {
+            Stream::Camera(pipeline) => {
+                return pipeline
+                    .wait(Some(LIVE_TIMEOUT))
+                    .map(|frames| Some(Input::Frames(frames)))
+                    .map_err(|e| {
+                        source_error(&self.name, format!("no frame from the camera: {e}"))
+                    });
+            }
+            Stream::Bag(bag) => bag,
+        };
         let started = Instant::now();
         loop {
-            match self.pipeline.wait(Some(BAG_POLL)) {
-                Ok(frames) => return Ok(Some(frames)),
-                Err(FrameWaitError::DidTimeoutBeforeFrameArrival) => {
-                    // Before the first frame there is no playback handle yet, so the end of
-                    // the file can only be seen after it.
-                    if let Some(p) = &self.playback
-                        && p.is_stopped(&self.name)?
-                    {
-                        return Ok(None);
-                    }
-                    if started.elapsed() >= BAG_STALL {
-                        return Err(source_error(
-                            &self.name,
-                            format!(
-                                "playback stalled: no frame for {} s and the file has not ended",
-                                BAG_STALL.as_secs()
-                            ),
-                        ));
-                    }
-                }
-                Err(e) => {
-                    return Err(source_error(
-                        &self.name,
-                        format!("cannot read a frame: {e}"),
-                    ));
-                }
+            if let Some(input) = bag.wait(BAG_POLL, &self.name)? {
+                return Ok(Some(input));
+            }
+            if bag.is_stopped(&self.name)? {
+                // The last frames may have been queued just before the status changed.
+                return bag.wait(Duration::ZERO, &self.name);
+            }
+            if started.elapsed() >= BAG_STALL {
+                return Err(source_error(
+                    &self.name,
+                    format!(
+                        "playback stalled: no frame for {} s and the file has not ended",
+                        BAG_STALL.as_secs()
+                    ),
+                ));
             }
         }
     }
 }
 
+/// One input of a source: a frameset from a camera's pipeline, or a single frame of a `.bag`.
+enum Input {
+    Frames(CompositeFrame),
+    Color(ColorFrame),
+    Depth(DepthFrame),
+}
+
+/// Where frames come from.
+#[derive(Debug)]
+enum Stream {
+    /// A live camera, through realsense-rust's pipeline.
+    Camera(ActivePipeline),
+    /// A `.bag` file, played without dropping frames.
+    Bag(playback::BagPlayer),
+}
+
+/// What a source reads once from its streams and device.
+struct StreamSetup {
+    /// The colour stream's intrinsics.
+    intrinsics: Intrinsics,
+    aligner: Aligner,
+    /// [m per depth unit]
+    depth_scale_m: f64,
+    /// The colour stream's rate [frames/s] (0 if unknown).
+    fps: i32,
+}
+
+impl StreamSetup {
+    /// Checks the formats and reads intrinsics, extrinsics and the depth scale.
+    fn read(
+        name: &str,
+        color: &StreamProfile,
+        depth: &StreamProfile,
+        sensors: &[Sensor],
+    ) -> Result<Self> {
+        let color_format = color.format();
+        if !matches!(
+            color_format,
+            Rs2Format::Rgb8 | Rs2Format::Bgr8 | Rs2Format::Rgba8 | Rs2Format::Bgra8
+        ) {
+            return Err(source_error(
+                name,
+                format!(
+                    "colour format {color_format:?} is not supported (RGB8, BGR8, RGBA8, BGRA8 are)"
+                ),
+            ));
+        }
+        let fps = color.framerate();
+        let ci = color
+            .intrinsics()
+            .map_err(|e| source_error(name, format!("cannot read the colour intrinsics: {e}")))?;
+        let intrinsics = pinhole(&ci, "colour", name)?;
+        if depth.format() != Rs2Format::Z16 {
+            return Err(source_error(
+                name,
+                format!(
+                    "depth format {:?} is not supported (Z16 is)",
+                    depth.format()
+                ),
+            ));
+        }
+        let di = depth
+            .intrinsics()
+            .map_err(|e| source_error(name, format!("cannot read the depth intrinsics: {e}")))?;
+        let depth_intrinsics = pinhole(&di, "depth", name)?;
+        let ext = depth.extrinsics(color).map_err(|e| {
+            source_error(
+                name,
+                format!("cannot read the depth-to-colour extrinsics: {e}"),
+            )
+        })?;
+        // librealsense2 stores the rotation column-major.
+        let r = ext.rotation().map(f64::from);
+        let t = ext.translation().map(f64::from);
+        let aligner = Aligner {
+            depth: depth_intrinsics,
+            color: intrinsics,
+            rotation: Matrix3::from_column_slice(&r),
+            translation: Vector3::new(t[0], t[1], t[2]),
+        };
+        // The depth sensor is the one with a DEPTH_UNITS option.
+        let depth_scale_m = sensors
+            .iter()
+            .find_map(|s| s.get_option(Rs2Option::DepthUnits))
+            .map(f64::from)
+            .filter(|s| s.is_finite() && *s > 0.0)
+            .ok_or_else(|| {
+                source_error(
+                    name,
+                    "the device reports no depth scale (DEPTH_UNITS option)",
+                )
+            })?;
+        Ok(Self {
+            intrinsics,
+            aligner,
+            depth_scale_m,
+            fps,
+        })
+    }
+}
+
 /// How many colour frames may wait for depth, and depth frames for colour.
-const MAX_QUEUED: usize = 4;
+const MAX_QUEUED: usize = 8;
 
 /// A colour frame waiting for its depth frame.
 #[derive(Debug)]
@@ -676,64 +697,72 @@ fn depth_image(frame: &DepthFrame, scale_m: f64, name: &str, index: u64) -> Resu
 impl RealSenseSource {
     /// Takes a frameset's new colour and depth frames into the queues.
     fn ingest(&mut self, frames: &CompositeFrame) -> Result<()> {
-        if self.is_bag && self.playback.is_none() {
-            // The first frameset leads to the playback device. It started in real time, where
-            // frames a slow consumer misses are dropped: switch it to non-real-time and go
-            // back to the start, so every frame is played (again) and waits for us. The
-            // frames seen twice are skipped as duplicates.
-            let Some(frame) = frames.frames_of_type::<ColorFrame>().into_iter().next() else {
-                return Ok(()); // a depth-only frameset: it will be played again
-            };
-            let playback = playback::Playback::from_frame(frame, &self.name)?;
-            playback.set_real_time(false, &self.name)?;
-            playback.seek_to_start(&self.name)?;
-            self.playback = Some(playback);
-        }
-        let index = self.next_index + self.pending.len() as u64;
         for depth in frames.frames_of_type::<DepthFrame>() {
-            let t_ms = depth.timestamp();
-            if !t_ms.is_finite() || self.last_depth_ms.is_some_and(|last| t_ms <= last) {
-                continue; // the syncer repeats depth frames too
-            }
-            self.last_depth_ms = Some(t_ms);
-            let raw = depth_image(&depth, self.depth_scale_m, &self.name, index)?;
-            self.depths.push_back(RawDepth { t_ms, image: raw });
-            while self.depths.len() > MAX_QUEUED {
-                self.depths.pop_front();
-            }
+            self.ingest_depth(&depth)?;
         }
         for color in frames.frames_of_type::<ColorFrame>() {
-            let t_ms = color.timestamp();
-            if !t_ms.is_finite() || self.last_color_ms.is_some_and(|last| t_ms <= last) {
-                self.skipped_duplicates += 1;
-                continue;
-            }
-            self.last_color_ms = Some(t_ms);
-            let image = color_image(&color, &self.name, index)?;
-            if image.width != self.intrinsics.width || image.height != self.intrinsics.height {
-                return Err(source_error(
-                    &self.name,
-                    format!(
-                        "frame {index}: colour image is {}x{} px, the stream's intrinsics say {}x{}",
-                        image.width, image.height, self.intrinsics.width, self.intrinsics.height
-                    ),
-                ));
-            }
-            self.pending.push_back(PendingColor { t_ms, image });
+            self.ingest_color(&color)?;
         }
         Ok(())
     }
 
-    /// The oldest pending colour frame with its aligned depth, if it can be decided now: its
-    /// depth frame has arrived, or a later one has (so it never will), or the input has ended,
-    /// or too many colour frames wait.
+    /// Takes a depth frame into the queue, once per timestamp (the syncer repeats them).
+    fn ingest_depth(&mut self, depth: &DepthFrame) -> Result<()> {
+        let index = self.next_index + self.pending.len() as u64;
+        let t_ms = depth.timestamp();
+        let too_old = self
+            .last_color_ms
+            .is_some_and(|last| t_ms < last - self.pair_tolerance_ms);
+        if !t_ms.is_finite() || too_old || self.depths.iter().any(|d| d.t_ms == t_ms) {
+            return Ok(());
+        }
+        let raw = depth_image(depth, self.depth_scale_m, &self.name, index)?;
+        let at = self.depths.partition_point(|d| d.t_ms < t_ms);
+        self.depths.insert(at, RawDepth { t_ms, image: raw });
+        while self.depths.len() > MAX_QUEUED {
+            self.depths.pop_front();
+        }
+        Ok(())
+    }
+
+    /// Queues a colour frame to wait for its depth frame, unless its timestamp was seen.
+    fn ingest_color(&mut self, color: &ColorFrame) -> Result<()> {
+        let index = self.next_index + self.pending.len() as u64;
+        let t_ms = color.timestamp();
+        let handed_out = self.last_color_ms.is_some_and(|last| t_ms <= last);
+        if !t_ms.is_finite() || handed_out || self.pending.iter().any(|c| c.t_ms == t_ms) {
+            self.skipped_duplicates += 1;
+            return Ok(());
+        }
+        let image = color_image(color, &self.name, index)?;
+        if image.width != self.intrinsics.width || image.height != self.intrinsics.height {
+            return Err(source_error(
+                &self.name,
+                format!(
+                    "frame {index}: colour image is {}x{} px, the stream's intrinsics say {}x{}",
+                    image.width, image.height, self.intrinsics.width, self.intrinsics.height
+                ),
+            ));
+        }
+        let at = self.pending.partition_point(|c| c.t_ms < t_ms);
+        self.pending.insert(at, PendingColor { t_ms, image });
+        Ok(())
+    }
+
+    /// The oldest pending colour frame with its aligned depth (the nearest in time), if it can
+    /// be decided now: its depth frame has arrived, or a later one has (so it never will), or
+    /// the input has ended, or too many colour frames wait.
     fn take_ready(&mut self, input_ended: bool) -> Option<CameraFrame> {
         let front = self.pending.front()?;
         let tol = self.pair_tolerance_ms;
         let matched = self
             .depths
             .iter()
-            .position(|d| (d.t_ms - front.t_ms).abs() <= tol);
+            .enumerate()
+            .map(|(i, d)| (i, (d.t_ms - front.t_ms).abs()))
+            .filter(|&(_, dt)| dt <= tol)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(i, _)| i);
         let hopeless = self
             .depths
             .back()
@@ -742,6 +771,7 @@ impl RealSenseSource {
             return None;
         }
         let PendingColor { t_ms, image } = self.pending.pop_front()?;
+        self.last_color_ms = Some(t_ms);
         let depth = matched
             .and_then(|i| self.depths.get(i))
             .map(|d| self.aligner.align(&d.image));
@@ -773,8 +803,10 @@ impl FrameSource for RealSenseSource {
             if self.ended {
                 return Ok(None);
             }
-            match self.wait_frameset()? {
-                Some(frames) => self.ingest(&frames)?,
+            match self.wait_input()? {
+                Some(Input::Frames(frames)) => self.ingest(&frames)?,
+                Some(Input::Color(color)) => self.ingest_color(&color)?,
+                Some(Input::Depth(depth)) => self.ingest_depth(&depth)?,
                 None => self.ended = true,
             }
         }
@@ -789,161 +821,420 @@ impl FrameSource for RealSenseSource {
     }
 }
 
-/// The playback device of a `.bag` source, through librealsense2's C API: realsense-rust 1.3
-/// neither exposes `rs2_playback_*` nor the raw device of a pipeline, so the device is reached
-/// from a frame (frame → sensor → device), as librealsense2's own wrappers do.
+/// `.bag` playback through librealsense2's C API (realsense-sys): realsense-rust 1.3 exposes
+/// neither `rs2_playback_*` nor the raw handles of its devices and pipelines.
+///
+/// The file is loaded as a playback device of our own and switched to non-real-time playback
+/// *before* it plays; no pipeline (and no frame syncer) is involved: the colour and depth
+/// sensors are opened on their recorded profiles and started with a callback that hands each
+/// frame to a bounded channel. Non-real-time playback waits for the callback, and the callback
+/// waits for room in the channel, so the file plays as fast as it is read and no frame is
+/// dropped; frames arrive in file order. (The earlier way — a pipeline, its playback device
+/// reached from the first frame and switched and rewound then — raced with the real-time
+/// start: frames played before the switch were dropped or queued ahead of the replayed ones.)
 mod playback {
-    use std::ffi::{CStr, c_char, c_int, c_uint, c_void};
+    use std::ffi::{CStr, CString, c_int, c_void};
+    use std::path::Path;
     use std::ptr::NonNull;
+    use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, sync_channel};
+    use std::time::Duration;
 
-    use realsense_rust::frame::ColorFrame;
-    use realsense_rust::prelude::FrameEx;
+    use realsense_rust::frame::{ColorFrame, DepthFrame};
+    use realsense_rust::sensor::Sensor;
+    use realsense_rust::stream_profile::StreamProfile;
+    use realsense_sys as sys;
 
-    use super::source_error;
-    use crate::Result;
+    use super::{Input, source_error};
+    use crate::{AssessError, Result};
 
-    /// `RS2_EXTENSION_PLAYBACK` (rs_types.h).
-    const RS2_EXTENSION_PLAYBACK: c_uint = 16;
-    /// `RS2_PLAYBACK_STATUS_STOPPED` (rs_record_playback.h).
-    const RS2_PLAYBACK_STATUS_STOPPED: c_uint = 3;
-
-    // The signatures of librealsense2 2.56's C API (rs.h, rs_frame.h, rs_sensor.h, rs_device.h,
-    // rs_record_playback.h), with the opaque handle types as `c_void`. The library is linked by
-    // realsense-sys.
-    unsafe extern "C" {
-        fn rs2_get_frame_sensor(frame: *const c_void, error: *mut *mut c_void) -> *mut c_void;
-        fn rs2_create_device_from_sensor(
-            sensor: *const c_void,
-            error: *mut *mut c_void,
-        ) -> *mut c_void;
-        fn rs2_delete_sensor(sensor: *mut c_void);
-        fn rs2_delete_device(device: *mut c_void);
-        fn rs2_release_frame(frame: *mut c_void);
-        fn rs2_is_device_extendable_to(
-            device: *const c_void,
-            extension: c_uint,
-            error: *mut *mut c_void,
-        ) -> c_int;
-        fn rs2_playback_device_set_real_time(
-            device: *const c_void,
-            real_time: c_int,
-            error: *mut *mut c_void,
-        );
-        fn rs2_playback_device_get_current_status(
-            device: *const c_void,
-            error: *mut *mut c_void,
-        ) -> c_uint;
-        fn rs2_playback_seek(device: *const c_void, time: i64, error: *mut *mut c_void);
-        fn rs2_get_error_message(error: *const c_void) -> *const c_char;
-        fn rs2_free_error(error: *mut c_void);
-    }
+    /// Frames the playback may run ahead of the reader.
+    const CHANNEL_FRAMES: usize = 4;
 
     /// Takes (and frees) a librealsense2 error: `Err(message)` if `error` is set.
-    fn check(error: *mut c_void) -> std::result::Result<(), String> {
+    fn check(error: *mut sys::rs2_error) -> std::result::Result<(), String> {
         if error.is_null() {
             return Ok(());
         }
         // SAFETY: `error` is a non-null rs2_error* that librealsense2 handed us; its message is
         // a NUL-terminated string owned by the error, copied before the error is freed.
         let message = unsafe {
-            let m = rs2_get_error_message(error);
+            let m = sys::rs2_get_error_message(error);
             let text = if m.is_null() {
                 "unknown librealsense2 error".to_string()
             } else {
                 CStr::from_ptr(m).to_string_lossy().into_owned()
             };
-            rs2_free_error(error);
+            sys::rs2_free_error(error);
             text
         };
         Err(message)
     }
 
-    /// An owned `rs2_device*` of a playback device; deleted on drop.
-    #[derive(Debug)]
-    pub(super) struct Playback {
-        device: NonNull<c_void>,
+    /// A frame reference handed over by the playback thread; released by its receiver.
+    struct RawFrame(NonNull<sys::rs2_frame>);
+
+    // SAFETY: librealsense2 frame references may be used and released on any thread.
+    unsafe impl Send for RawFrame {}
+
+    /// The sensors' frame callback: runs on librealsense2's playback thread and blocks it
+    /// until the reader has room (that is what keeps non-real-time playback lossless).
+    unsafe extern "C" fn on_frame(frame: *mut sys::rs2_frame, user: *mut c_void) {
+        let Some(frame) = NonNull::new(frame) else {
+            return;
+        };
+        // SAFETY: `user` is the `SyncSender` boxed in `BagPlayer::open`, freed only after the
+        // sensors stopped (so after the last call of this callback).
+        let sender = unsafe { &*user.cast::<SyncSender<RawFrame>>() };
+        if let Err(unsent) = sender.send(RawFrame(frame)) {
+            // The reader is gone (the source is being dropped): release the frame here.
+            // SAFETY: we own this reference and nobody else will release it.
+            unsafe { sys::rs2_release_frame(unsent.0.0.as_ptr()) };
+        }
     }
 
-    // SAFETY: librealsense2 devices are thread-safe handles (realsense-rust's `Device` is
-    // `Send` for the same reason).
-    unsafe impl Send for Playback {}
+    /// One opened sensor of the playback device and the streams it plays.
+    struct OpenSensor {
+        sensor: NonNull<sys::rs2_sensor>,
+        /// The sensor's profile list, which owns `played`.
+        profiles: NonNull<sys::rs2_stream_profile_list>,
+        played: Vec<NonNull<sys::rs2_stream_profile>>,
+        opened: bool,
+        started: bool,
+    }
 
-    impl Drop for Playback {
+    /// A `.bag` file played without dropping frames; owns every handle and releases them on
+    /// drop (sensors stopped and closed first, the context last).
+    pub(super) struct BagPlayer {
+        context: NonNull<sys::rs2_context>,
+        device: NonNull<sys::rs2_device>,
+        sensor_list: NonNull<sys::rs2_sensor_list>,
+        /// The sensors that play the colour and the depth stream (one or two).
+        open: Vec<OpenSensor>,
+        /// The colour and depth profiles played (owned by an `OpenSensor`'s list).
+        color: Option<NonNull<sys::rs2_stream_profile>>,
+        depth: Option<NonNull<sys::rs2_stream_profile>>,
+        /// The sender the callbacks use (boxed: its address is their `user` pointer).
+        sender: Option<NonNull<SyncSender<RawFrame>>>,
+        receiver: Option<Receiver<RawFrame>>,
+    }
+
+    // SAFETY: librealsense2 handles may be used from any thread (realsense-rust's `Device`
+    // and `Sensor` are `Send` for the same reason); the receiver and sender are `Send`.
+    unsafe impl Send for BagPlayer {}
+
+    impl std::fmt::Debug for BagPlayer {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.debug_struct("BagPlayer").finish_non_exhaustive()
+        }
+    }
+
+    impl Drop for BagPlayer {
         fn drop(&mut self) {
-            // SAFETY: `device` came from rs2_create_device_from_sensor and is deleted once.
-            unsafe { rs2_delete_device(self.device.as_ptr()) }
+            // Drop the reader first: a callback blocked on a full channel then returns.
+            self.receiver = None;
+            // SAFETY: every handle is ours, non-null and released exactly once; the sensors
+            // stop before the callbacks' sender is freed, lists before their owners.
+            unsafe {
+                for open in self.open.drain(..) {
+                    let mut error: *mut sys::rs2_error = std::ptr::null_mut();
+                    if open.started {
+                        sys::rs2_stop(open.sensor.as_ptr(), &mut error);
+                        let _ = check(error);
+                    }
+                    if open.opened {
+                        sys::rs2_close(open.sensor.as_ptr(), &mut error);
+                        let _ = check(error);
+                    }
+                    sys::rs2_delete_stream_profiles_list(open.profiles.as_ptr());
+                    sys::rs2_delete_sensor(open.sensor.as_ptr());
+                }
+                if let Some(sender) = self.sender.take() {
+                    drop(Box::from_raw(sender.as_ptr()));
+                }
+                sys::rs2_delete_sensor_list(self.sensor_list.as_ptr());
+                sys::rs2_delete_device(self.device.as_ptr());
+                sys::rs2_delete_context(self.context.as_ptr());
+            }
         }
     }
 
-    impl Playback {
-        /// The playback device that produced `frame`. The frame is consumed (released).
-        pub(super) fn from_frame(frame: ColorFrame, name: &str) -> Result<Self> {
-            // SAFETY: get_owned_raw hands us ownership of the frame reference, which we release
-            // below; the sensor and device handles are created, checked and deleted (device:
-            // on drop of `Playback`) exactly once.
-            unsafe {
-                let frame = frame.get_owned_raw().cast::<c_void>();
-                let mut error: *mut c_void = std::ptr::null_mut();
-                let sensor = rs2_get_frame_sensor(frame.as_ptr(), &mut error);
-                rs2_release_frame(frame.as_ptr());
-                check(error).map_err(|m| {
-                    source_error(name, format!("cannot reach the playback sensor: {m}"))
-                })?;
-                let sensor = NonNull::new(sensor)
-                    .ok_or_else(|| source_error(name, "the frame has no sensor"))?;
-                let device = rs2_create_device_from_sensor(sensor.as_ptr(), &mut error);
-                rs2_delete_sensor(sensor.as_ptr());
-                check(error).map_err(|m| {
-                    source_error(name, format!("cannot reach the playback device: {m}"))
-                })?;
-                let device = NonNull::new(device)
-                    .ok_or_else(|| source_error(name, "the sensor has no device"))?;
-                let playback = Self { device };
-                let is_playback = rs2_is_device_extendable_to(
-                    device.as_ptr(),
-                    RS2_EXTENSION_PLAYBACK,
-                    &mut error,
-                );
-                check(error).map_err(|m| source_error(name, m))?;
-                if is_playback == 0 {
-                    return Err(source_error(name, "the device is not a playback device"));
+    /// The first colour and the first depth profile of `sensor`, with the sensor's profile
+    /// list (which owns them).
+    ///
+    /// # Safety
+    /// `sensor` must be a live sensor handle.
+    #[allow(clippy::type_complexity)]
+    unsafe fn find_profiles(
+        sensor: NonNull<sys::rs2_sensor>,
+    ) -> std::result::Result<
+        (
+            Option<NonNull<sys::rs2_stream_profile_list>>,
+            Option<NonNull<sys::rs2_stream_profile>>,
+            Option<NonNull<sys::rs2_stream_profile>>,
+        ),
+        String,
+    > {
+        let mut error: *mut sys::rs2_error = std::ptr::null_mut();
+        // SAFETY: the caller guarantees `sensor`; the list is returned (or deleted).
+        unsafe {
+            let list = sys::rs2_get_stream_profiles(sensor.as_ptr(), &mut error);
+            check(error)?;
+            let Some(list) = NonNull::new(list) else {
+                return Ok((None, None, None));
+            };
+            let count = sys::rs2_get_stream_profiles_count(list.as_ptr(), &mut error);
+            if let Err(m) = check(error) {
+                sys::rs2_delete_stream_profiles_list(list.as_ptr());
+                return Err(m);
+            }
+            let (mut color, mut depth) = (None, None);
+            for i in 0..count {
+                let profile = sys::rs2_get_stream_profile(list.as_ptr(), i, &mut error);
+                if check(error).is_err() {
+                    continue;
                 }
-                Ok(playback)
-            }
-        }
-
-        /// Real-time playback (drops frames a slow consumer misses) or not (waits for them).
-        pub(super) fn set_real_time(&self, real_time: bool, name: &str) -> Result<()> {
-            let mut error: *mut c_void = std::ptr::null_mut();
-            // SAFETY: `device` is a live playback device handle (checked in `from_frame`).
-            unsafe {
-                rs2_playback_device_set_real_time(
-                    self.device.as_ptr(),
-                    c_int::from(real_time),
+                let Some(profile) = NonNull::new(profile.cast_mut()) else {
+                    continue;
+                };
+                let (mut kind, mut format, mut index, mut uid, mut fps) = (0, 0, 0, 0, 0);
+                sys::rs2_get_stream_profile_data(
+                    profile.as_ptr(),
+                    &mut kind,
+                    &mut format,
+                    &mut index,
+                    &mut uid,
+                    &mut fps,
                     &mut error,
                 );
+                if check(error).is_err() {
+                    continue;
+                }
+                if kind == sys::rs2_stream_RS2_STREAM_COLOR && color.is_none() {
+                    color = Some(profile);
+                } else if kind == sys::rs2_stream_RS2_STREAM_DEPTH && depth.is_none() {
+                    depth = Some(profile);
+                }
             }
-            check(error)
-                .map_err(|m| source_error(name, format!("cannot set real-time playback: {m}")))
+            Ok((Some(list), color, depth))
+        }
+    }
+
+    impl BagPlayer {
+        /// Loads `path`, switches it to non-real-time playback and starts its colour and depth
+        /// sensors. `cannot` words the failures (`cannot open bag …`).
+        pub(super) fn open(path: &Path, cannot: impl Fn(String) -> AssessError) -> Result<Self> {
+            let file = CString::new(path.to_string_lossy().as_bytes())
+                .map_err(|_| cannot("the path contains a NUL byte".to_string()))?;
+            let mut error: *mut sys::rs2_error = std::ptr::null_mut();
+            // SAFETY: calls into librealsense2 with valid arguments; every handle is checked
+            // for an error and for null before use and owned by `player` (or released) at once,
+            // so `Drop` releases it on every early return.
+            unsafe {
+                let context = sys::rs2_create_context(sys::RS2_API_VERSION as c_int, &mut error);
+                check(error).map_err(|m| cannot(format!("cannot create a context: {m}")))?;
+                let context = NonNull::new(context)
+                    .ok_or_else(|| cannot("librealsense2 returned no context".to_string()))?;
+                let device =
+                    sys::rs2_context_add_device(context.as_ptr(), file.as_ptr(), &mut error);
+                let device = match (check(error), NonNull::new(device)) {
+                    (Ok(()), Some(device)) => device,
+                    (result, _) => {
+                        sys::rs2_delete_context(context.as_ptr());
+                        return Err(cannot(
+                            result.err().unwrap_or_else(|| "no device".to_string()),
+                        ));
+                    }
+                };
+                let sensor_list = sys::rs2_query_sensors(device.as_ptr(), &mut error);
+                let sensor_list = match (check(error), NonNull::new(sensor_list)) {
+                    (Ok(()), Some(list)) => list,
+                    (result, _) => {
+                        sys::rs2_delete_device(device.as_ptr());
+                        sys::rs2_delete_context(context.as_ptr());
+                        return Err(cannot(
+                            result.err().unwrap_or_else(|| "no sensors".to_string()),
+                        ));
+                    }
+                };
+                let mut player = Self {
+                    context,
+                    device,
+                    sensor_list,
+                    open: Vec::new(),
+                    color: None,
+                    depth: None,
+                    sender: None,
+                    receiver: None,
+                };
+                let is_playback = sys::rs2_is_device_extendable_to(
+                    device.as_ptr(),
+                    sys::rs2_extension_RS2_EXTENSION_PLAYBACK,
+                    &mut error,
+                );
+                check(error).map_err(&cannot)?;
+                if is_playback == 0 {
+                    return Err(cannot("it is not a RealSense recording".to_string()));
+                }
+                sys::rs2_playback_device_set_real_time(device.as_ptr(), 0, &mut error);
+                check(error)
+                    .map_err(|m| cannot(format!("cannot switch off real-time playback: {m}")))?;
+
+                // The first sensor with a colour stream plays it, and likewise for depth (a
+                // D435i recording has two sensors; a synthetic one may have one for both).
+                let count = sys::rs2_get_sensors_count(sensor_list.as_ptr(), &mut error);
+                check(error).map_err(&cannot)?;
+                for i in 0..count {
+                    let sensor = sys::rs2_create_sensor(sensor_list.as_ptr(), i, &mut error);
+                    check(error).map_err(&cannot)?;
+                    let Some(sensor) = NonNull::new(sensor) else {
+                        continue;
+                    };
+                    let (list, color, depth) = match find_profiles(sensor) {
+                        Ok(found) => found,
+                        Err(m) => {
+                            sys::rs2_delete_sensor(sensor.as_ptr());
+                            return Err(cannot(m));
+                        }
+                    };
+                    let mut played = Vec::new();
+                    if let Some(color) = color.filter(|_| player.color.is_none()) {
+                        player.color = Some(color);
+                        played.push(color);
+                    }
+                    if let Some(depth) = depth.filter(|_| player.depth.is_none()) {
+                        player.depth = Some(depth);
+                        played.push(depth);
+                    }
+                    match list {
+                        Some(profiles) if !played.is_empty() => player.open.push(OpenSensor {
+                            sensor,
+                            profiles,
+                            played,
+                            opened: false,
+                            started: false,
+                        }),
+                        _ => {
+                            if let Some(list) = list {
+                                sys::rs2_delete_stream_profiles_list(list.as_ptr());
+                            }
+                            sys::rs2_delete_sensor(sensor.as_ptr());
+                        }
+                    }
+                }
+                if player.color.is_none() || player.depth.is_none() {
+                    return Err(cannot(
+                        "it does not hold both a colour and a depth stream".to_string(),
+                    ));
+                }
+                let (sender, receiver) = sync_channel::<RawFrame>(CHANNEL_FRAMES);
+                let sender = NonNull::from(Box::leak(Box::new(sender)));
+                player.sender = Some(sender);
+                player.receiver = Some(receiver);
+                for open in &mut player.open {
+                    let profiles: Vec<*const sys::rs2_stream_profile> = open
+                        .played
+                        .iter()
+                        .map(|p| p.as_ptr().cast_const())
+                        .collect();
+                    sys::rs2_open_multiple(
+                        open.sensor.as_ptr(),
+                        profiles.as_ptr().cast_mut(),
+                        c_int::try_from(profiles.len()).unwrap_or(0),
+                        &mut error,
+                    );
+                    check(error).map_err(|m| cannot(format!("cannot open a sensor: {m}")))?;
+                    open.opened = true;
+                }
+                for open in &mut player.open {
+                    sys::rs2_start(
+                        open.sensor.as_ptr(),
+                        Some(on_frame),
+                        sender.as_ptr().cast::<c_void>(),
+                        &mut error,
+                    );
+                    check(error).map_err(|m| cannot(format!("cannot start a sensor: {m}")))?;
+                    open.started = true;
+                }
+                Ok(player)
+            }
         }
 
-        /// Goes back to the start of the file.
-        pub(super) fn seek_to_start(&self, name: &str) -> Result<()> {
-            let mut error: *mut c_void = std::ptr::null_mut();
-            // SAFETY: as in `set_real_time`; the time is in nanoseconds from the start.
-            unsafe { rs2_playback_seek(self.device.as_ptr(), 0, &mut error) };
-            check(error).map_err(|m| source_error(name, format!("cannot rewind the playback: {m}")))
+        /// The played colour and depth profiles (valid while `self` lives).
+        pub(super) fn profiles(&self, name: &str) -> Result<(StreamProfile, StreamProfile)> {
+            let wrap = |profile: Option<NonNull<sys::rs2_stream_profile>>, what: &str| {
+                let profile = profile.ok_or_else(|| {
+                    source_error(name, format!("the recording has no {what} stream"))
+                })?;
+                StreamProfile::try_from(profile).map_err(|e| {
+                    source_error(name, format!("cannot read the {what} stream profile: {e}"))
+                })
+            };
+            Ok((wrap(self.color, "colour")?, wrap(self.depth, "depth")?))
+        }
+
+        /// The playback device's sensors (for their options).
+        pub(super) fn sensors(&self, name: &str) -> Result<Vec<Sensor>> {
+            let mut error: *mut sys::rs2_error = std::ptr::null_mut();
+            // SAFETY: `sensor_list` is live; each created sensor handle is owned by the
+            // returned `Sensor`, which deletes it.
+            unsafe {
+                let count = sys::rs2_get_sensors_count(self.sensor_list.as_ptr(), &mut error);
+                check(error).map_err(|m| source_error(name, m))?;
+                let mut sensors = Vec::new();
+                for i in 0..count {
+                    let sensor = sys::rs2_create_sensor(self.sensor_list.as_ptr(), i, &mut error);
+                    check(error).map_err(|m| source_error(name, m))?;
+                    if let Some(sensor) = NonNull::new(sensor) {
+                        sensors.push(Sensor::from(sensor));
+                    }
+                }
+                Ok(sensors)
+            }
+        }
+
+        /// The next frame, or `None` if none arrived within `timeout`.
+        pub(super) fn wait(&mut self, timeout: Duration, name: &str) -> Result<Option<Input>> {
+            let Some(receiver) = &self.receiver else {
+                return Ok(None);
+            };
+            let frame = match receiver.recv_timeout(timeout) {
+                Ok(frame) => frame.0,
+                Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => return Ok(None),
+            };
+            let mut error: *mut sys::rs2_error = std::ptr::null_mut();
+            // SAFETY: `frame` is a frame reference we own; it is handed to a frame wrapper that
+            // releases it, or released here.
+            unsafe {
+                let is_depth = sys::rs2_is_frame_extendable_to(
+                    frame.as_ptr(),
+                    sys::rs2_extension_RS2_EXTENSION_DEPTH_FRAME,
+                    &mut error,
+                );
+                if let Err(m) = check(error) {
+                    sys::rs2_release_frame(frame.as_ptr());
+                    return Err(source_error(name, format!("cannot read a frame: {m}")));
+                }
+                let input = if is_depth != 0 {
+                    DepthFrame::try_from(frame).map(Input::Depth)
+                } else {
+                    ColorFrame::try_from(frame).map(Input::Color)
+                };
+                input
+                    .map(Some)
+                    .map_err(|e| source_error(name, format!("cannot read a frame: {e}")))
+            }
         }
 
         /// Whether playback has stopped (the end of a non-looping file).
         pub(super) fn is_stopped(&self, name: &str) -> Result<bool> {
-            let mut error: *mut c_void = std::ptr::null_mut();
-            // SAFETY: as in `set_real_time`.
-            let status =
-                unsafe { rs2_playback_device_get_current_status(self.device.as_ptr(), &mut error) };
+            let mut error: *mut sys::rs2_error = std::ptr::null_mut();
+            // SAFETY: `device` is the live playback device we own.
+            let status = unsafe {
+                sys::rs2_playback_device_get_current_status(self.device.as_ptr(), &mut error)
+            };
             check(error)
                 .map_err(|m| source_error(name, format!("cannot read the playback status: {m}")))?;
-            Ok(status == RS2_PLAYBACK_STATUS_STOPPED)
+            Ok(status == sys::rs2_playback_status_RS2_PLAYBACK_STATUS_STOPPED)
         }
     }
 }
