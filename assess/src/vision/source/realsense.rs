@@ -68,7 +68,6 @@ use realsense_rust::frame::{ColorFrame, CompositeFrame, DepthFrame, PixelKind};
 use realsense_rust::kind::{Rs2CameraInfo, Rs2Format, Rs2Option, Rs2StreamKind};
 use realsense_rust::pipeline::{ActivePipeline, InactivePipeline};
 use realsense_rust::prelude::FrameEx;
-use realsense_rust::sensor::Sensor;
 use realsense_rust::stream_profile::StreamProfile;
 
 use super::FrameSource;
@@ -328,12 +327,16 @@ impl RealSenseSource {
                     &name,
                     find(Rs2StreamKind::Color, "colour")?,
                     find(Rs2StreamKind::Depth, "depth")?,
-                    &profile.device().sensors(),
+                    profile
+                        .device()
+                        .sensors()
+                        .iter()
+                        .find_map(|s| s.get_option(Rs2Option::DepthUnits)),
                 )?
             }
             Stream::Bag(bag) => {
                 let (color, depth) = bag.profiles(&name)?;
-                StreamSetup::read(&name, &color, &depth, &bag.sensors(&name)?)?
+                StreamSetup::read(&name, &color, &depth, bag.depth_units(&name)?)?
             }
         };
         let StreamSetup {
@@ -446,12 +449,13 @@ struct StreamSetup {
 }
 
 impl StreamSetup {
-    /// Checks the formats and reads intrinsics, extrinsics and the depth scale.
+    /// Checks the formats and reads intrinsics and extrinsics; `depth_units` is the depth
+    /// sensor's `DEPTH_UNITS` option [m per unit].
     fn read(
         name: &str,
         color: &StreamProfile,
         depth: &StreamProfile,
-        sensors: &[Sensor],
+        depth_units: Option<f32>,
     ) -> Result<Self> {
         let color_format = color.format();
         if !matches!(
@@ -499,9 +503,7 @@ impl StreamSetup {
             translation: Vector3::new(t[0], t[1], t[2]),
         };
         // The depth sensor is the one with a DEPTH_UNITS option.
-        let depth_scale_m = sensors
-            .iter()
-            .find_map(|s| s.get_option(Rs2Option::DepthUnits))
+        let depth_scale_m = depth_units
             .map(f64::from)
             .filter(|s| s.is_finite() && *s > 0.0)
             .ok_or_else(|| {
@@ -840,7 +842,6 @@ mod playback {
     use std::time::Duration;
 
     use realsense_rust::frame::{ColorFrame, DepthFrame};
-    use realsense_rust::sensor::Sensor;
     use realsense_rust::stream_profile::StreamProfile;
     use realsense_sys as sys;
 
@@ -849,6 +850,8 @@ mod playback {
 
     /// Frames the playback may run ahead of the reader.
     const CHANNEL_FRAMES: usize = 4;
+    /// How long closing waits for the playback to stop.
+    const STOP_WAIT: Duration = Duration::from_secs(2);
 
     /// Takes (and frees) a librealsense2 error: `Err(message)` if `error` is set.
     fn check(error: *mut sys::rs2_error) -> std::result::Result<(), String> {
@@ -870,8 +873,25 @@ mod playback {
         Err(message)
     }
 
-    /// A frame reference handed over by the playback thread; released by its receiver.
+    /// A frame reference handed over by the playback thread; released on drop unless taken
+    /// (frames left in the channel when the source closes must be released too: a frame holds
+    /// its sensor, and so the playback device and its threads, alive).
     struct RawFrame(NonNull<sys::rs2_frame>);
+
+    impl RawFrame {
+        /// The reference, now owned by the caller.
+        fn take(self) -> NonNull<sys::rs2_frame> {
+            let frame = std::mem::ManuallyDrop::new(self);
+            frame.0
+        }
+    }
+
+    impl Drop for RawFrame {
+        fn drop(&mut self) {
+            // SAFETY: we own this reference and nobody else releases it.
+            unsafe { sys::rs2_release_frame(self.0.as_ptr()) }
+        }
+    }
 
     // SAFETY: librealsense2 frame references may be used and released on any thread.
     unsafe impl Send for RawFrame {}
@@ -885,11 +905,8 @@ mod playback {
         // SAFETY: `user` is the `SyncSender` boxed in `BagPlayer::open`, freed only after the
         // sensors stopped (so after the last call of this callback).
         let sender = unsafe { &*user.cast::<SyncSender<RawFrame>>() };
-        if let Err(unsent) = sender.send(RawFrame(frame)) {
-            // The reader is gone (the source is being dropped): release the frame here.
-            // SAFETY: we own this reference and nobody else will release it.
-            unsafe { sys::rs2_release_frame(unsent.0.0.as_ptr()) };
-        }
+        // If the reader is gone (the source is closing), the returned frame is released.
+        let _ = sender.send(RawFrame(frame));
     }
 
     /// One opened sensor of the playback device and the streams it plays.
@@ -906,6 +923,8 @@ mod playback {
     /// drop (sensors stopped and closed first, the context last).
     pub(super) struct BagPlayer {
         context: NonNull<sys::rs2_context>,
+        /// The file, as loaded into `context` (to unload it).
+        file: CString,
         device: NonNull<sys::rs2_device>,
         sensor_list: NonNull<sys::rs2_sensor_list>,
         /// The sensors that play the colour and the depth stream (one or two).
@@ -948,11 +967,35 @@ mod playback {
                     sys::rs2_delete_stream_profiles_list(open.profiles.as_ptr());
                     sys::rs2_delete_sensor(open.sensor.as_ptr());
                 }
+                // The last sensor's stop makes the playback rewind its reader on its own thread;
+                // wait for that to finish (the status turns to stopped), or the device would be
+                // released — and a process could exit — while it still reads the file.
+                let waited = std::time::Instant::now();
+                while waited.elapsed() < STOP_WAIT {
+                    let mut error: *mut sys::rs2_error = std::ptr::null_mut();
+                    let status = sys::rs2_playback_device_get_current_status(
+                        self.device.as_ptr(),
+                        &mut error,
+                    );
+                    if check(error).is_err()
+                        || status == sys::rs2_playback_status_RS2_PLAYBACK_STATUS_STOPPED
+                    {
+                        break;
+                    }
+                    std::thread::sleep(Duration::from_millis(5));
+                }
                 if let Some(sender) = self.sender.take() {
                     drop(Box::from_raw(sender.as_ptr()));
                 }
                 sys::rs2_delete_sensor_list(self.sensor_list.as_ptr());
                 sys::rs2_delete_device(self.device.as_ptr());
+                let mut error: *mut sys::rs2_error = std::ptr::null_mut();
+                sys::rs2_context_remove_device(
+                    self.context.as_ptr(),
+                    self.file.as_ptr(),
+                    &mut error,
+                );
+                let _ = check(error);
                 sys::rs2_delete_context(self.context.as_ptr());
             }
         }
@@ -1058,6 +1101,7 @@ mod playback {
                 };
                 let mut player = Self {
                     context,
+                    file: file.clone(),
                     device,
                     sensor_list,
                     open: Vec::new(),
@@ -1172,23 +1216,34 @@ mod playback {
             Ok((wrap(self.color, "colour")?, wrap(self.depth, "depth")?))
         }
 
-        /// The playback device's sensors (for their options).
-        pub(super) fn sensors(&self, name: &str) -> Result<Vec<Sensor>> {
+        /// The `DEPTH_UNITS` option of the first sensor that has one [m per unit].
+        pub(super) fn depth_units(&self, name: &str) -> Result<Option<f32>> {
             let mut error: *mut sys::rs2_error = std::ptr::null_mut();
-            // SAFETY: `sensor_list` is live; each created sensor handle is owned by the
-            // returned `Sensor`, which deletes it.
+            // SAFETY: `sensor_list` is live; each sensor handle created here is deleted here.
             unsafe {
                 let count = sys::rs2_get_sensors_count(self.sensor_list.as_ptr(), &mut error);
                 check(error).map_err(|m| source_error(name, m))?;
-                let mut sensors = Vec::new();
                 for i in 0..count {
                     let sensor = sys::rs2_create_sensor(self.sensor_list.as_ptr(), i, &mut error);
                     check(error).map_err(|m| source_error(name, m))?;
-                    if let Some(sensor) = NonNull::new(sensor) {
-                        sensors.push(Sensor::from(sensor));
+                    let Some(sensor) = NonNull::new(sensor) else {
+                        continue;
+                    };
+                    let options = sensor.as_ptr().cast::<sys::rs2_options>().cast_const();
+                    let option = sys::rs2_option_RS2_OPTION_DEPTH_UNITS;
+                    let supported = sys::rs2_supports_option(options, option, &mut error);
+                    let value = if check(error).is_ok() && supported != 0 {
+                        let v = sys::rs2_get_option(options, option, &mut error);
+                        check(error).ok().map(|()| v)
+                    } else {
+                        None
+                    };
+                    sys::rs2_delete_sensor(sensor.as_ptr());
+                    if value.is_some() {
+                        return Ok(value);
                     }
                 }
-                Ok(sensors)
+                Ok(None)
             }
         }
 
@@ -1198,7 +1253,7 @@ mod playback {
                 return Ok(None);
             };
             let frame = match receiver.recv_timeout(timeout) {
-                Ok(frame) => frame.0,
+                Ok(frame) => frame.take(),
                 Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => return Ok(None),
             };
             let mut error: *mut sys::rs2_error = std::ptr::null_mut();
