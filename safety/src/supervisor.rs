@@ -800,8 +800,9 @@ impl<R: Robot> Supervisor<R> {
 
 /// The scale for a servo motion that keeps the implied acceleration within `dv_max` [rad/s]
 /// per cycle: the cap scale if it is reachable; the highest reachable scale if the cap is
-/// above it; the lowest reachable one if the cap is below it and every joint decelerates;
-/// otherwise the motion is refused (SAF-REQ-004).
+/// above it; the lowest reachable one if the cap is below it and every joint decelerates
+/// (possibly > 1; reported with the cap's reason, or SAF-REQ-004 when no cap binds); otherwise
+/// the motion is refused (SAF-REQ-004).
 fn servo_scale(
     motion: &Motion,
     cap_scale: f64,
@@ -839,7 +840,11 @@ fn servo_scale(
         .zip(&motion.v_prev)
         .all(|(v, v_prev)| (lo * v).abs() <= v_prev.abs());
     if decelerating {
-        Ok((lo, cap_reason))
+        // Slow it at the limit along its direction: `lo` > the cap scale, maybe > 1 (more
+        // speed than asked). The command is changed, so a reason is reported: the cap that
+        // made it slow down, or — when the command itself decelerates harder than the limit
+        // allows — the acceleration limit (SAF-REQ-004).
+        Ok((lo, cap_reason.or_else(|| Some(acceleration_at(cap_scale)))))
     } else {
         Err(acceleration_at(cap_scale))
     }

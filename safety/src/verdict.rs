@@ -297,7 +297,10 @@ pub enum Verdict {
     /// The command was sent with its velocities scaled by `scale` (and a speedj acceleration
     /// clamped to the limit); `violation` names the binding limit.
     Reduced {
-        /// Scale applied to the command's velocity [-], in (0, 1].
+        /// Scale applied to the command's velocity [-], > 0. Below 1 for a cap; above 1 only
+        /// when a servo command decelerates harder than the acceleration limit allows and is
+        /// slowed at the limit instead (`violation`: SAF-REQ-004) — still slower than the
+        /// previous cycle on every joint.
         scale: f64,
         /// The limit that made the reduction necessary.
         violation: Violation,

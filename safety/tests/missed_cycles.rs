@@ -328,3 +328,37 @@ fn saf_req_004_a_cycle_run_on_a_held_state_still_counts_as_a_cycle() {
     }
     assert_eq!(rig.fired(Requirement::Saf004JointAcceleration), 0);
 }
+
+#[test]
+fn saf_req_004_a_stop_harder_than_the_limit_is_slowed_at_the_limit_and_reported() {
+    // Wrist 3 cruises at 0.9 π rad/s; then the planner commands 0.1 π rad/s at once. Stopping
+    // that fast needs ≈ 0.8 π rad/s in one cycle (≈ 1250 rad/s²). The supervisor slows the joint
+    // at its acceleration limit instead, along the commanded direction — so it sends *more*
+    // speed than asked (scale > 1). That changes the command, so it must be reported: a
+    // reduction citing SAF-REQ-004, never `Passed` (it used to pass silently).
+    let mut rig = started();
+    let mut ramp = Ramp::new(0.9 * PI, 0.5 * PI, 1);
+    for _ in 0..1000 {
+        assert_eq!(rig.command_after(1, ramp.next()), Verdict::Passed);
+    }
+    let before = rig.sent();
+    let mut abrupt = before;
+    abrupt[J] += 0.1 * PI * 0.002;
+    let verdict = rig.command_after(1, abrupt);
+    let Verdict::Reduced { scale, violation } = verdict else {
+        panic!("an abrupt stop passed as {verdict:?}")
+    };
+    assert!(scale > 1.0, "scale {scale}");
+    assert_eq!(
+        violation.requirement(),
+        Requirement::Saf004JointAcceleration,
+        "{violation:?}"
+    );
+    assert_eq!(rig.fired(Requirement::Saf004JointAcceleration), 1);
+    // What went out: slower than before, faster than asked, and within the acceleration limit.
+    let step = rig.sent()[J] - before[J];
+    assert!(
+        step < 0.9 * PI * 0.002 && step > 0.1 * PI * 0.002,
+        "step {step}"
+    );
+}

@@ -1111,7 +1111,9 @@ fn drive<R: TrialRobot>(
             match &verdict {
                 Verdict::Passed => {}
                 Verdict::Reduced { scale, .. } => {
-                    if *scale < 1.0 - 1e-6 {
+                    // Slowed for a cap (< 1) or, for a too-hard deceleration, slowed at the
+                    // acceleration limit (> 1): either way not the planned motion.
+                    if (*scale - 1.0).abs() > 1e-6 {
                         controller.command_reduced();
                     }
                 }

@@ -240,7 +240,7 @@ impl Loop {
         match verdict {
             Verdict::Passed => {}
             Verdict::Reduced { scale, .. } => {
-                if scale < 1.0 - 1e-6 {
+                if (scale - 1.0).abs() > 1e-6 {
                     self.ctl.command_reduced();
                 }
             }
