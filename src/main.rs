@@ -13,6 +13,13 @@ mod vision_cmd;
 
 use clap::{Parser, Subcommand};
 
+/// Tests count the allocations of the control cycle (thread-local: only a counted section of
+/// the test's own thread; see `trial::control`'s tests).
+#[cfg(test)]
+#[global_allocator]
+static ALLOCATOR: hrc_adapt_tests::alloc_count::CountingAllocator =
+    hrc_adapt_tests::alloc_count::CountingAllocator;
+
 /// Adapts a UR5e cobot to its human operator from vision-based cognitive-workload assessment.
 #[derive(Debug, Parser)]
 #[command(name = "hrc-adapt", version, about)]

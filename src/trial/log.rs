@@ -618,6 +618,13 @@ impl TrialLog {
         self.push(HotRecord::Event(t_s, *event))
     }
 
+    /// Writes out what the control-rate calls queued in the ring (what every camera-rate call
+    /// does first).
+    #[cfg(test)]
+    pub(crate) fn drain_ring(&mut self) -> anyhow::Result<()> {
+        self.drain()
+    }
+
     /// Drains the ring, closes every file, writes `summary.json` and the report.
     pub(crate) fn finish(mut self) -> anyhow::Result<TrialFiles> {
         self.drain()?;

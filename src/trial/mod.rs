@@ -16,6 +16,7 @@
 
 mod backend;
 pub(crate) mod config;
+mod control;
 mod cues;
 mod events;
 #[cfg(feature = "vision")]

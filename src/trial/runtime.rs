@@ -13,26 +13,26 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use adapt::controller::{
-    Controller, ControllerConfig, MotionAdaptation, OperatorView, RawHandoverFile, SmoothnessScale,
-    SpeedScale,
+    Controller, ControllerConfig, MotionAdaptation, RawHandoverFile, SmoothnessScale, SpeedScale,
 };
 use adapt::envelope::SafetyEnvelope;
-use adapt::task::{Phase, TaskEventKind};
+use adapt::task::Phase;
 use anyhow::Context as _;
 use assess::{AreaRole, AssessConfig, Assessor, CueFrame, RobotContext, Workspace};
 use policies::{Adaptation, PolicyKind, RuleTable, TaskContext, TaskPhase};
-use robot_io::geometry::{ARM_CAPSULES, Capsule, HumanBody, Torso, closest_approaches};
+use robot_io::geometry::{HumanBody, Torso};
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Robot, RobotState};
 use safety::{Supervisor, SupervisorConfig, Verdict, Violation, WorldView};
 
 use super::backend::UrPorts;
 use super::config::TrialConfig;
+use super::control::{ControlCycle, CycleInput, CycleOutput};
 use super::cues::{CueSource, RecordedCues};
 use super::events::TrialEvent;
 #[cfg(feature = "vision")]
 use super::live::LiveCues;
-use super::log::{CycleRecord, LogOptions, TrialLog, TrialMeta};
+use super::log::{LogOptions, TrialLog, TrialMeta};
 use super::operator::{Level, RobotView, SimulatedOperator};
 
 /// Control period [s] (UR5e).
@@ -56,7 +56,7 @@ pub(crate) struct TrialSpec {
 /// A `SimRobot` advanced one 2 ms cycle by each `read_state` (the mock clock): read → decide →
 /// send → (next read advances the model).
 #[derive(Debug)]
-struct LockstepSim {
+pub(crate) struct LockstepSim {
     sim: SimRobot,
     first: bool,
 }
@@ -90,7 +90,7 @@ fn task_phase(p: Phase) -> TaskPhase {
 
 /// The phase's name as [`TrialEvent::TaskPhase`] carries it (the variant name, which the
 /// summary's robot-idle phases and the report's timeline colours match).
-fn phase_name(p: Phase) -> &'static str {
+pub(crate) fn phase_name(p: Phase) -> &'static str {
     match p {
         Phase::Idle => "Idle",
         Phase::Fetch => "Fetch",
@@ -126,64 +126,6 @@ pub(super) fn motion_adaptation(a: &Adaptation) -> MotionAdaptation {
         min_approach_duration: bounded(a.timing.min_approach_duration_s),
         wait_for_attention: a.timing.gates_start(),
         attention_on_robot: a.gate.clear,
-    }
-}
-
-fn verdict_kind(v: &Verdict) -> &'static str {
-    match v {
-        Verdict::Passed => "passed",
-        Verdict::Reduced { .. } => "reduced",
-        Verdict::Stopped { .. } => "stopped",
-        Verdict::Halted { .. } => "halted",
-    }
-}
-
-/// How long a supervisor verdict (reaction, requirement) must hold before it is logged as a
-/// safety event [s] (see the `log` module docs, "Safety events").
-const SAFETY_DEBOUNCE_S: f64 = 0.05;
-
-/// Turns the per-cycle supervisor verdicts into safety events: an event is emitted when the
-/// (reaction, requirement) pair changes to a non-`passed` pair **and** the new pair has held
-/// for `hold_s`; it is stamped with the time the pair started. A return to `passed` that holds
-/// for `hold_s` re-arms it (no event). Shorter excursions are not events; every verdict is still
-/// in `/robot/command`.
-#[derive(Debug, Clone, Copy)]
-struct SafetyDebounce {
-    hold_s: f64,
-    logged: (&'static str, &'static str),
-    candidate: (&'static str, &'static str),
-    since_s: f64,
-}
-
-impl SafetyDebounce {
-    const PASSED: (&'static str, &'static str) = ("passed", "none");
-
-    fn new(hold_s: f64) -> Self {
-        Self {
-            hold_s,
-            logged: Self::PASSED,
-            candidate: Self::PASSED,
-            since_s: 0.0,
-        }
-    }
-
-    /// Feeds the verdict of the cycle at `t_s`; returns (onset [s], pair) of a new event.
-    fn update(
-        &mut self,
-        t_s: f64,
-        pair: (&'static str, &'static str),
-    ) -> Option<(f64, (&'static str, &'static str))> {
-        if pair != self.candidate {
-            self.candidate = pair;
-            self.since_s = t_s;
-        }
-        if self.candidate != self.logged && t_s - self.since_s >= self.hold_s - 1e-9 {
-            self.logged = self.candidate;
-            if self.logged != Self::PASSED {
-                return Some((self.since_s, self.logged));
-            }
-        }
-        None
     }
 }
 
@@ -385,17 +327,6 @@ pub(crate) trait TrialRobot: Robot {
 }
 
 impl TrialRobot for LockstepSim {}
-
-/// A robot-io error that means "no new sample now" rather than a failure of the loop: the
-/// link is down or being re-established.
-fn is_link_error(e: &robot_io::RobotIoError) -> bool {
-    matches!(
-        e,
-        robot_io::RobotIoError::LinkDown { .. }
-            | robot_io::RobotIoError::LinkClosed { .. }
-            | robot_io::RobotIoError::Timeout { .. }
-    )
-}
 
 /// The panic message of a caught panic.
 fn panic_message(p: &(dyn std::any::Any + Send)) -> &str {
@@ -723,8 +654,10 @@ fn drive<R: TrialRobot>(
     // The planner stays inside the supervisor's own limits (the same numbers, checked
     // independently by each).
     ctl_cfg.envelope = planner_envelope(&supervisor_cfg)?;
-    let mut supervisor = Supervisor::new(robot, supervisor_cfg)?;
-    let mut controller = Controller::new(ctl_cfg)?;
+    let mut cc = ControlCycle::new(
+        Supervisor::new(robot, supervisor_cfg)?,
+        Controller::new(ctl_cfg)?,
+    );
     let meta = TrialMeta {
         participant: spec.participant.clone(),
         condition: spec.condition.as_str().to_owned(),
@@ -766,18 +699,14 @@ fn drive<R: TrialRobot>(
 
     let cue_rate = cfg.cue_rate_hz;
     let max_cycles = (cfg.max_duration_s / CYCLE_S).ceil() as u64;
-    let mut state = RobotState::default();
-    let mut cmd = JointCommand::Stop { decel: 3.0 };
     let mut frame = CueFrame::empty(0.0);
     let mut motion = MotionAdaptation::default();
     let mut humans = HumanBody::default();
-    let mut world = WorldView::clear(0.0);
     let mut next_cue: u64 = 0;
     let mut last_cue_t = 0.0;
     let mut started: u32 = 0; // handovers armed
     let mut done: u32 = 0; // handovers completed
     let mut last_indicator: Option<Option<assess::Indicator>> = None;
-    let mut safety_events = SafetyDebounce::new(SAFETY_DEBOUNCE_S);
     let mut assembly_since: Option<f64> = None;
     let mut prev_tcp_v = [0.0f64; 3];
     let mut peak_acc = 0.0f64;
@@ -795,7 +724,6 @@ fn drive<R: TrialRobot>(
     // Link loss (controller clock only; see "Link loss" in the module docs).
     let link_cfg = cfg.link;
     let mut last_ts = f64::NEG_INFINITY; // the newest robot timestamp seen
-    let mut capsules = [Capsule::point([0.0; 3], 0.0); ARM_CAPSULES];
     let mut timer = match clock {
         Clock::Mock => None,
         Clock::Controller(rate) => Some(CycleTimer::new(rate)),
@@ -813,20 +741,14 @@ fn drive<R: TrialRobot>(
                 reason = reason::INTERRUPTED;
                 break;
             }
-            let fresh = match supervisor.read_state(&mut state) {
-                Ok(()) => state.timestamp_s > last_ts,
-                // No new sample now: the supervisor keeps the previous state and counts the
-                // missed cycle (SAF-REQ-009).
-                Err(safety::SafetyError::Robot(e)) if is_link_error(&e) => false,
-                Err(e) => {
-                    return Err(anyhow::Error::new(e).context("reading the robot state failed"));
-                }
-            };
+            // No new sample now: the supervisor keeps the previous state and counts the
+            // missed cycle (SAF-REQ-009).
+            let fresh = cc.read(last_ts).context("reading the robot state failed")?;
             if fresh {
-                last_ts = state.timestamp_s;
+                last_ts = cc.state.timestamp_s;
             }
             if let Some(timer) = timer.as_mut() {
-                timer.arrived(state.timestamp_s, fresh);
+                timer.arrived(cc.state.timestamp_s, fresh);
             }
             let dt = match clock {
                 Clock::Mock => {
@@ -835,10 +757,10 @@ fn drive<R: TrialRobot>(
                 }
                 Clock::Controller(_) => {
                     let now = Instant::now();
-                    if fresh && matches!(supervisor.latched(), Some(Violation::SendFailed)) {
+                    if fresh && matches!(cc.supervisor.latched(), Some(Violation::SendFailed)) {
                         // A send failed while the link was down (SAF-REQ-012); the link is back:
                         // the reset succeeds once a stop has been delivered since.
-                        let _ = supervisor.reset();
+                        let _ = cc.supervisor.reset();
                     }
                     if !fresh && outage.is_none() {
                         outage = Some(Outage::new(now));
@@ -870,16 +792,17 @@ fn drive<R: TrialRobot>(
                                 break;
                             }
                             // The trial is paused: the supervisor holds the robot stopped.
-                            world.now_s = t;
-                            let _ = supervisor.step(&hold_cmd, &world);
-                            let playing = state.runtime_state == robot_io::runtime_state::PLAYING;
-                            let at_rest = state.actual_qd.iter().all(|v| v.abs() < REST_RAD_S);
-                            if fresh && playing && at_rest && supervisor.latched().is_none() {
+                            cc.world.now_s = t;
+                            let _ = cc.supervisor.step(&hold_cmd, &cc.world);
+                            let playing =
+                                cc.state.runtime_state == robot_io::runtime_state::PLAYING;
+                            let at_rest = cc.state.actual_qd.iter().all(|v| v.abs() < REST_RAD_S);
+                            if fresh && playing && at_rest && cc.supervisor.latched().is_none() {
                                 resumed = true;
                             } else {
                                 if fresh && !playing && o.restart_due(now) {
                                     // The controller's watchdog stopped our program meanwhile.
-                                    supervisor.robot().restart_program();
+                                    cc.supervisor.robot().restart_program();
                                 }
                                 o.holds += 1;
                                 if o.holds % 25 == 1 {
@@ -898,11 +821,11 @@ fn drive<R: TrialRobot>(
                         // re-plans from the measured joints.
                         outage = None;
                         live.link_down_s = None;
-                        t0 = Some(state.timestamp_s - (prev_t + CYCLE_S));
-                        controller.command_overridden();
+                        t0 = Some(cc.state.timestamp_s - (prev_t + CYCLE_S));
+                        cc.controller.command_overridden();
                         log.event(prev_t + CYCLE_S, &TrialEvent::Link { up: true })?;
                     }
-                    let t_robot = state.timestamp_s - *t0.get_or_insert(state.timestamp_s);
+                    let t_robot = cc.state.timestamp_s - *t0.get_or_insert(cc.state.timestamp_s);
                     t = if !fresh {
                         // A missed sample: this cycle runs on the held state at the predicted
                         // time; the supervisor stops the robot after 3 of them (SAF-REQ-009).
@@ -911,7 +834,7 @@ fn drive<R: TrialRobot>(
                         t_robot
                     } else if t_robot < prev_t - CLOCK_RESTART_S {
                         // The robot's clock went back (a restarted controller): re-base.
-                        t0 = Some(state.timestamp_s - (prev_t + CYCLE_S));
+                        t0 = Some(cc.state.timestamp_s - (prev_t + CYCLE_S));
                         prev_t + CYCLE_S
                     } else {
                         // Behind the predicted time of missed cycles: keep time monotonic
@@ -921,13 +844,13 @@ fn drive<R: TrialRobot>(
                     if t >= cfg.max_duration_s {
                         break;
                     }
-                    if fresh && state.runtime_state != robot_io::runtime_state::PLAYING {
+                    if fresh && cc.state.runtime_state != robot_io::runtime_state::PLAYING {
                         // The control program stopped (watchdog, protective stop, pendant):
                         // nothing we send moves the robot any more.
                         reason = reason::ROBOT_PROGRAM_STOPPED;
                         detail = Some(format!(
                             "the robot's control program stopped at t = {t:.3} s (runtime state {})",
-                            state.runtime_state
+                            cc.state.runtime_state
                         ));
                         break;
                     }
@@ -935,7 +858,7 @@ fn drive<R: TrialRobot>(
                 }
             };
             prev_t = t;
-            let v = &state.actual_tcp_speed;
+            let v = &cc.state.actual_tcp_speed;
             let acc = ((v[0] - prev_tcp_v[0]).powi(2)
                 + (v[1] - prev_tcp_v[1]).powi(2)
                 + (v[2] - prev_tcp_v[2]).powi(2))
@@ -951,9 +874,9 @@ fn drive<R: TrialRobot>(
             if t * cue_rate + 1e-9 >= next_cue as f64 {
                 let tc = next_cue as f64 / cue_rate;
                 next_cue += 1;
-                let p = &state.actual_tcp_pose;
+                let p = &cc.state.actual_tcp_pose;
                 let view = RobotView {
-                    phase: controller.phase(),
+                    phase: cc.controller.phase(),
                     tcp_m: cfg.frame.to_workspace([p[0], p[1], p[2]]),
                     tcp_speed_m_s: (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(),
                     tcp_peak_acc_m_s2: peak_acc,
@@ -983,8 +906,8 @@ fn drive<R: TrialRobot>(
                     }
                 };
                 frame.robot = RobotContext {
-                    collaborating: controller.collaborating(),
-                    incomplete: controller.incomplete(),
+                    collaborating: cc.controller.collaborating(),
+                    incomplete: cc.controller.incomplete(),
                 };
                 log.cues(tc, &frame)?;
                 let a = assessor.update(&frame);
@@ -997,7 +920,7 @@ fn drive<R: TrialRobot>(
                 }
                 let ctx = TaskContext {
                     now_s: tc,
-                    phase: task_phase(controller.phase()),
+                    phase: task_phase(cc.controller.phase()),
                     in_collaboration_area: confirmed_role == Some(AreaRole::Collaboration),
                     in_instruction_area: confirmed_role == Some(AreaRole::Instruction),
                     assembly_dwell_s: assembly_since.map_or(0.0, |s| tc - s),
@@ -1046,125 +969,61 @@ fn drive<R: TrialRobot>(
             }
 
             // --- handover scheduling ---
-            let phase = controller.phase();
+            let phase = cc.controller.phase();
             if (phase == Phase::Idle || phase == Phase::Done)
                 && started == done
                 && started < n_handovers
                 && t >= planned_start[started as usize]
             {
                 if phase == Phase::Done {
-                    controller.reset_task();
+                    cc.controller.reset_task();
                 }
-                controller.start_handover();
+                cc.controller.start_handover();
                 started += 1;
-            } else if phase == Phase::Done && controller.task().part_returned() {
+            } else if phase == Phase::Done && cc.controller.task().part_returned() {
                 // The part came back (present timeout): try the same handover again.
-                controller.reset_task();
-                controller.start_handover();
+                cc.controller.reset_task();
+                cc.controller.start_handover();
             }
 
-            // --- 500 Hz: controller → supervisor → robot ---
-            let view = OperatorView {
-                body: humans,
-                perception_age_s: (t - last_cue_t).max(0.0),
-            };
-            controller.step(t, &state, &motion, &view, &mut cmd);
-            for ev in controller.events() {
-                match ev.kind {
-                    TaskEventKind::PhaseChanged { to, .. } => {
-                        log.event(
-                            t,
-                            &TrialEvent::TaskPhase {
-                                phase: phase_name(to),
-                            },
-                        )?;
-                        if to == Phase::Present {
-                            log.event(t, &TrialEvent::Presented { handover: started })?;
-                        }
-                    }
-                    TaskEventKind::PresentTimeout => {
-                        log.event(t, &TrialEvent::PartReturned { handover: started })?
-                    }
-                    TaskEventKind::ReleaseConfirmed => {
-                        if simulated {
-                            operator.release_confirmed();
-                            for e in operator.events() {
-                                log.event(t, e)?;
-                            }
-                        } else {
-                            log.event(t, &TrialEvent::Grasped { handover: done + 1 })?;
-                        }
-                        done += 1;
-                    }
-                    TaskEventKind::PartGripped | TaskEventKind::GraspDetected { .. } => {}
-                }
-            }
-            world.now_s = t;
-            // The supervisor watches the same tracked body as the planner, torso included.
-            world.human = humans;
-            world.perception_age_s = (t - last_cue_t).max(0.0);
-            world.collaborating = controller.collaborating();
-            let verdict = supervisor.step(&cmd, &world);
-            // A command the supervisor changed was not executed as planned: the controller
-            // re-plans from the robot's state (a reduction by rounding alone does not count);
-            // after a stop it first lets the robot come to rest.
-            match &verdict {
-                Verdict::Passed => {}
-                Verdict::Reduced { scale, .. } => {
-                    // Slowed for a cap (< 1) or, for a too-hard deceleration, slowed at the
-                    // acceleration limit (> 1): either way not the planned motion.
-                    if (*scale - 1.0).abs() > 1e-6 {
-                        controller.command_reduced();
-                    }
-                }
-                Verdict::Stopped { .. } | Verdict::Halted { .. } => controller.command_overridden(),
-            }
-            let pair = (
-                verdict_kind(&verdict),
-                verdict.requirement().map_or("none", |r| r.id()),
-            );
-            if let Some((onset, (reaction, requirement))) = safety_events.update(t, pair) {
-                log.event(
-                    onset,
-                    &TrialEvent::Safety {
-                        reaction,
-                        requirement,
-                    },
-                )?;
-            }
-            if fresh {
-                // A held state is no new robot sample: robot.csv keeps the robot's own.
-                log.robot_state(t, &state)?;
-            }
-            log.command(t, &cmd, &verdict)?;
-            log.cycle(
-                t,
-                &CycleRecord {
-                    missed: match clock {
-                        Clock::Mock => 0,
-                        Clock::Controller(_) => ((dt / CYCLE_S).round() as u32).saturating_sub(1),
-                    },
-                    latency_s: timer.as_ref().map(CycleTimer::latency_s),
-                    wake_jitter_s: timer.as_ref().and_then(|t| t.jitter_s),
-                    jerk_limit_rad_s3: controller.jerk_limit_rad_s3(),
-                    time_scale: controller.scale_report().scale,
+            // --- 500 Hz: controller → supervisor → robot → log ring ---
+            let input = CycleInput {
+                t_s: t,
+                fresh,
+                humans,
+                cue_t_s: last_cue_t,
+                motion: &motion,
+                started,
+                done,
+                simulated,
+                missed: match clock {
+                    Clock::Mock => 0,
+                    Clock::Controller(_) => ((dt / CYCLE_S).round() as u32).saturating_sub(1),
                 },
-            )?;
-            log.human_distance(
-                t,
-                min_human_distance_m(&humans, &state.actual_q, supervisor.config(), &mut capsules),
-            )?;
+                latency_s: timer.as_ref().map(CycleTimer::latency_s),
+                wake_jitter_s: timer.as_ref().and_then(|t| t.jitter_s),
+            };
+            let CycleOutput { verdict, released } = cc.act(&input, &mut log)?;
+            if released {
+                if simulated {
+                    operator.release_confirmed();
+                    for e in operator.events() {
+                        log.event(t, e)?;
+                    }
+                }
+                done += 1;
+            }
             let intervention = match &verdict {
                 Verdict::Passed => None,
                 v => v.requirement().map(|r| r.id()),
             };
             if let Some(s) = stuck.update(
                 t,
-                controller.phase(),
-                controller.task().target_q_rad(),
-                &state.actual_q,
+                cc.controller.phase(),
+                cc.controller.task().target_q_rad(),
+                &cc.state.actual_q,
                 intervention,
-                controller.stats().otg_errors,
+                cc.controller.stats().otg_errors,
             ) {
                 reason = reason::TASK_IMPOSSIBLE;
                 detail = Some(s.describe(t));
@@ -1187,13 +1046,13 @@ fn drive<R: TrialRobot>(
     if failure.is_some() {
         reason = reason::ERROR;
     }
-    // 1. Stop the robot through the supervisor.
+    // 1. Stop the robot through the cc.supervisor.
     let t_end = match clock {
         Clock::Mock => k as f64 * CYCLE_S,
         Clock::Controller(_) => t + CYCLE_S,
     };
     let stopped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        stop_robot(&mut supervisor, &mut state, &mut world, t_end);
+        stop_robot(&mut cc.supervisor, &mut cc.state, &mut cc.world, t_end);
     }));
     if let Err(p) = stopped {
         let e = anyhow::anyhow!(
@@ -1359,23 +1218,6 @@ fn stop_robot<R: Robot>(
     }
 }
 
-/// The smallest surface distance between the operator's tracked body (head, hands, torso;
-/// base frame) and the arm's capsules at the measured joints `q` [rad], with the supervisor's
-/// arm and body models [m]; `None` when nothing is tracked. `capsules` is scratch space.
-fn min_human_distance_m(
-    humans: &HumanBody,
-    q: &robot_io::Joints,
-    cfg: &SupervisorConfig,
-    capsules: &mut [Capsule; ARM_CAPSULES],
-) -> Option<f64> {
-    cfg.arm.capsules(q, capsules);
-    closest_approaches(capsules, humans, &cfg.body)
-        .iter()
-        .flatten()
-        .map(|a| a.distance_m)
-        .reduce(f64::min)
-}
-
 fn assessor_role(ws: &Workspace, id: assess::AreaId) -> Option<AreaRole> {
     ws.role(id)
 }
@@ -1489,7 +1331,7 @@ mod tests {
     fn safety_events_are_debounced_pair_changes() {
         let stop = ("stopped", "SAF-REQ-007");
         let reduce = ("reduced", "SAF-REQ-004");
-        let mut d = SafetyDebounce::new(0.05);
+        let mut d = super::super::control::SafetyDebounce::new(0.05);
         let mut events = Vec::new();
         // 2 ms cycles: 30 ms stop / 30 ms reduce flicker for 0.6 s, then 100 ms reduce, then
         // 100 ms passed, then 100 ms reduce again.
@@ -1707,3 +1549,7 @@ mod tests {
 #[cfg(test)]
 #[path = "runtime_exit_tests.rs"]
 mod exit_tests;
+
+#[cfg(test)]
+#[path = "control_tests.rs"]
+mod control_tests;
