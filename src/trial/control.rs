@@ -5,7 +5,7 @@
 //!
 //! Real-time contract: neither call allocates (the log calls copy `Copy` records into the
 //! trial log's preallocated ring; the controller, the supervisor and the RTDE client keep
-//! their buffers). The tests in `runtime/control_tests.rs`
+//! their buffers). The tests in `src/trial/control_tests.rs`
 //! (`the_control_cycle_allocates_nothing_on_the_simulated_robot`,
 //! `the_control_cycle_allocates_nothing_over_rtde_to_the_emulator`) prove it with a counting
 //! allocator over whole handovers, the runtime's per-cycle handover scheduling included.
