@@ -9,7 +9,7 @@
 //! camera-rate calls do in a trial.
 
 use hrc_adapt_tests::alloc_count::allocations_in;
-use robot_io::geometry::HumanBody;
+use robot_io::geometry::{HumanBody, Torso};
 
 use super::*;
 use crate::trial::control::{ControlCycle, CycleInput};

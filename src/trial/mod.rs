@@ -17,6 +17,7 @@
 mod backend;
 pub(crate) mod config;
 mod control;
+mod cue_cycle;
 mod cues;
 mod events;
 #[cfg(feature = "vision")]

@@ -18,9 +18,9 @@ use adapt::controller::{
 use adapt::envelope::SafetyEnvelope;
 use adapt::task::Phase;
 use anyhow::Context as _;
-use assess::{AreaRole, AssessConfig, Assessor, CueFrame, RobotContext, Workspace};
-use policies::{Adaptation, PolicyKind, RuleTable, TaskContext, TaskPhase};
-use robot_io::geometry::{HumanBody, Torso};
+use assess::{AssessConfig, Assessor, RobotContext, Workspace};
+use policies::{Adaptation, PolicyKind, RuleTable, TaskPhase};
+use robot_io::geometry::HumanBody;
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Robot, RobotState};
 use safety::{Supervisor, SupervisorConfig, Verdict, Violation, WorldView};
@@ -28,6 +28,7 @@ use safety::{Supervisor, SupervisorConfig, Verdict, Violation, WorldView};
 use super::backend::UrPorts;
 use super::config::TrialConfig;
 use super::control::{ControlCycle, CycleInput, CycleOutput};
+use super::cue_cycle::{CueCycle, OperatorSource};
 use super::cues::{CueSource, RecordedCues};
 use super::events::TrialEvent;
 #[cfg(feature = "vision")]
@@ -75,7 +76,7 @@ impl Robot for LockstepSim {
     }
 }
 
-fn task_phase(p: Phase) -> TaskPhase {
+pub(super) fn task_phase(p: Phase) -> TaskPhase {
     match p {
         Phase::Idle => TaskPhase::Idle,
         Phase::Fetch => TaskPhase::Fetch,
@@ -547,6 +548,9 @@ fn load_setup(
     cues: &CueSource,
     out_dir: &Path,
 ) -> anyhow::Result<Setup> {
+    // Without a camera front-end, the robot and the run folder matter only to a live camera.
+    #[cfg(not(feature = "vision"))]
+    let _ = (robot, out_dir);
     let cfg = &spec.config;
     let recorded = match cues {
         CueSource::Recorded(p) => Some(RecordedCues::load(p)?),
@@ -611,15 +615,21 @@ struct Setup {
 enum LiveCues {}
 
 #[cfg(not(feature = "vision"))]
-impl LiveCues {
-    fn label(&self) -> &str {
+impl OperatorSource for LiveCues {
+    fn label(&self) -> Option<&str> {
         match *self {}
     }
-    fn hold(&mut self, _tc: f64, _out: &mut CueFrame) -> Option<f64> {
+    fn simulated(&self) -> bool {
         match *self {}
     }
-    fn finish(self) -> anyhow::Result<()> {
-        match self {}
+    fn frame(
+        &mut self,
+        _tc: f64,
+        _robot: &RobotView,
+        _frame: &mut assess::CueFrame,
+        _log: &mut TrialLog,
+    ) -> anyhow::Result<Option<f64>> {
+        match *self {}
     }
 }
 
@@ -641,14 +651,30 @@ fn drive<R: TrialRobot>(
         assess_cfg,
         ctl_cfg,
         table,
-        mut recorded,
-        live: mut camera,
+        recorded,
+        live: camera,
     } = setup;
+    // The simulated operator's task parameters set the schedule, whoever the operator is.
+    let operator = SimulatedOperator::new(spec.condition, &workspace, spec.seed)?;
     // The operator is simulated only when no recorded or live cues replace it.
-    let simulated = recorded.is_none() && camera.is_none();
-    let mut policy = spec.policy.build(&table);
-    let mut assessor = Assessor::new(workspace.clone(), assess_cfg.clone())?;
-    let mut operator = SimulatedOperator::new(spec.condition, &workspace, spec.seed)?;
+    let source: Box<dyn OperatorSource> = match (recorded, camera) {
+        (Some(r), _) => Box::new(r),
+        (None, Some(l)) => Box::new(l),
+        (None, None) => Box::new(SimulatedOperator::new(
+            spec.condition,
+            &workspace,
+            spec.seed,
+        )?),
+    };
+    let simulated = source.simulated();
+    let cue_source = source.label().map(str::to_owned);
+    let mut cue = CueCycle::new(
+        source,
+        Assessor::new(workspace.clone(), assess_cfg.clone())?,
+        spec.policy.build(&table),
+        workspace.clone(),
+        cfg.frame,
+    );
     let supervisor_cfg = SupervisorConfig::ur5e();
     let mut ctl_cfg = ctl_cfg;
     // The planner stays inside the supervisor's own limits (the same numbers, checked
@@ -665,10 +691,7 @@ fn drive<R: TrialRobot>(
         seed: spec.seed,
         // A recorded or live operator is not simulated (the robot may still be: see `robot`).
         simulated,
-        cue_source: recorded
-            .as_ref()
-            .map(|r| r.label().to_owned())
-            .or_else(|| camera.as_ref().map(|l| l.label().to_owned())),
+        cue_source,
         // Wall clock: only in trial.mcap's /trial/meta and the report, never in summary.json.
         started_utc: super::utc_now_iso(),
         robot: robot_label.to_owned(),
@@ -685,7 +708,6 @@ fn drive<R: TrialRobot>(
         },
     )?;
 
-    let role_of = |id| assessor_role(&workspace, id);
     let n_handovers = operator.params().handovers() as u32;
     // Nominal need time of part k: the operator's nominal work before it, with the expected
     // excursion overhead; the robot starts fetching `lead_time_s` earlier.
@@ -699,15 +721,12 @@ fn drive<R: TrialRobot>(
 
     let cue_rate = cfg.cue_rate_hz;
     let max_cycles = (cfg.max_duration_s / CYCLE_S).ceil() as u64;
-    let mut frame = CueFrame::empty(0.0);
     let mut motion = MotionAdaptation::default();
     let mut humans = HumanBody::default();
     let mut next_cue: u64 = 0;
     let mut last_cue_t = 0.0;
     let mut started: u32 = 0; // handovers armed
     let mut done: u32 = 0; // handovers completed
-    let mut last_indicator: Option<Option<assess::Indicator>> = None;
-    let mut assembly_since: Option<f64> = None;
     let mut prev_tcp_v = [0.0f64; 3];
     let mut peak_acc = 0.0f64;
     let mut live = Live {
@@ -882,87 +901,24 @@ fn drive<R: TrialRobot>(
                     tcp_peak_acc_m_s2: peak_acc,
                 };
                 peak_acc = 0.0;
-                let cue_t = match (recorded.as_mut(), camera.as_mut()) {
-                    (Some(r), _) => {
-                        if r.ended(tc) {
-                            reason = "cues_ended";
-                            break;
-                        }
-                        r.hold(tc, &mut frame)
-                    }
-                    (None, Some(l)) => match l.hold(tc, &mut frame) {
-                        Some(t) => t,
-                        None => {
-                            reason = "cues_ended";
-                            break;
-                        }
-                    },
-                    (None, None) => {
-                        operator.step(tc, &view, &mut frame);
-                        for e in operator.events() {
-                            log.event(tc, e)?;
-                        }
-                        tc
-                    }
-                };
-                frame.robot = RobotContext {
+                let robot = RobotContext {
                     collaborating: cc.controller.collaborating(),
                     incomplete: cc.controller.incomplete(),
                 };
-                log.cues(tc, &frame)?;
-                let a = assessor.update(&frame);
-                log.assessment(tc, a, &workspace)?;
-                let confirmed_role = a.confirmed.and_then(&role_of);
-                if confirmed_role == Some(AreaRole::Assembly) {
-                    assembly_since.get_or_insert(tc);
-                } else {
-                    assembly_since = None;
-                }
-                let ctx = TaskContext {
-                    now_s: tc,
-                    phase: task_phase(cc.controller.phase()),
-                    in_collaboration_area: confirmed_role == Some(AreaRole::Collaboration),
-                    in_instruction_area: confirmed_role == Some(AreaRole::Instruction),
-                    assembly_dwell_s: assembly_since.map_or(0.0, |s| tc - s),
+                let Some(out) = cue.step(tc, &view, robot, cc.controller.phase(), &mut log)? else {
+                    reason = "cues_ended";
+                    break;
                 };
-                let adaptation = policy.decide(a, &ctx);
-                log.adaptation(tc, &adaptation)?;
-                if last_indicator != Some(adaptation.reason.indicator) {
-                    if last_indicator.is_some() {
-                        log.event(
-                            tc,
-                            &TrialEvent::AdaptationChanged {
-                                indicator: policies::indicator_key(adaptation.reason.indicator),
-                            },
-                        )?;
-                    }
-                    last_indicator = Some(adaptation.reason.indicator);
-                }
-                motion = motion_adaptation(&adaptation);
-                // Human points in the base frame (head, left hand, right hand).
-                let to_base = |p: &assess::Vec3| cfg.frame.to_base([p.x, p.y, p.z]);
-                humans.head_m = frame.head.as_ref().map(|h| to_base(&h.position));
-                humans.left_hand_m = frame.hands[0].as_ref().map(|h| to_base(&h.position));
-                humans.right_hand_m = frame.hands[1].as_ref().map(|h| to_base(&h.position));
-                humans.torso = frame.body.as_ref().map(|b| Torso {
-                    shoulder_mid_m: to_base(&b.position),
-                    normal: cfg
-                        .frame
-                        .direction_to_base([b.facing.x, b.facing.y, b.facing.z]),
-                });
+                motion = out.motion;
+                humans = out.humans;
                 // A held recorded or camera frame is as old as its (mapped) time.
-                last_cue_t = cue_t;
+                last_cue_t = out.cue_t_s;
                 live.t_s = tc;
-                live.hrc_cwl = a.windowed.hrc_cwl;
-                live.dominant = policies::indicator_key(a.dominant.indicator);
+                live.hrc_cwl = out.hrc_cwl;
+                live.dominant = out.dominant;
                 live.handovers_done = done;
                 progress(&live);
-                let finished = if simulated {
-                    operator.finished()
-                } else {
-                    done >= n_handovers
-                };
-                if finished {
+                if cue.source.finished(done, n_handovers) {
                     reason = "completed";
                     break;
                 }
@@ -1005,12 +961,7 @@ fn drive<R: TrialRobot>(
             };
             let CycleOutput { verdict, released } = cc.act(&input, &mut log)?;
             if released {
-                if simulated {
-                    operator.release_confirmed();
-                    for e in operator.events() {
-                        log.event(t, e)?;
-                    }
-                }
+                cue.source.released(t, &mut log)?;
                 done += 1;
             }
             let intervention = match &verdict {
@@ -1065,9 +1016,9 @@ fn drive<R: TrialRobot>(
             None => e,
         });
     }
-    // 2. The camera thread (an error or a panic there ended the cues: "cues_ended").
-    if let Some(camera) = camera.take()
-        && let Err(e) = camera.finish()
+    // 2. The operator source: a camera's thread (an error or a panic there ended the cues:
+    //    "cues_ended").
+    if let Err(e) = cue.finish()
         && failure.is_none()
     {
         reason = reason::ERROR;
@@ -1216,10 +1167,6 @@ fn stop_robot<R: Robot>(
             break;
         }
     }
-}
-
-fn assessor_role(ws: &Workspace, id: assess::AreaId) -> Option<AreaRole> {
-    ws.role(id)
 }
 
 /// Run one simulated trial (simulated operator, in-process `SimRobot`, mock clock) into
