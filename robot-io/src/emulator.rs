@@ -7,8 +7,9 @@
 //! is sampled from the virtual clock at its requested frequency, so what a client receives
 //! depends on virtual cycles only, not on scheduling jitter.
 //!
-//! Enforced like a controller: protocol version 2 only, unknown fields answered `NOT_FOUND`,
-//! one writer per input (`IN_USE`), and a client whose queue stays full for
+//! Enforced like a controller: protocol version 2 only, unknown fields answered `NOT_FOUND`
+//! (a trailing comma after the last name is ignored, as ur_rtde sends it), one writer per
+//! input (`IN_USE`), and a client whose queue stays full for
 //! [`EmulatorConfig::stall_timeout`] is dropped.
 //!
 //! Not emulated: the primary/secondary interfaces' state packages (the script ports only
@@ -1179,6 +1180,14 @@ async fn read_client_package(
     Ok(())
 }
 
+/// The field names of a setup request's comma-separated list. One trailing comma is
+/// ignored, as a controller ignores it: ur_rtde ends every list with one
+/// (`"timestamp,actual_q,"`), and the reply has one type per real name. Any other empty name
+/// (`"a,,b"`, an empty list) stays a name, answered `NOT_FOUND`.
+fn field_names(names: &str) -> std::str::Split<'_, char> {
+    names.strip_suffix(',').unwrap_or(names).split(',')
+}
+
 fn reply(tx: &mpsc::Sender<Vec<u8>>, pkg: ControllerPackage<'_>) -> bool {
     let mut out = Vec::new();
     pkg.encode(&mut out).is_ok() && tx.try_send(out).is_ok()
@@ -1242,7 +1251,7 @@ async fn rtde_session(
                 let mut w = lock(&world);
                 let mut types = Vec::new();
                 let mut sources = Vec::new();
-                for name in names.split(',') {
+                for name in field_names(names) {
                     match w.output_source(name) {
                         Some((s, t)) => {
                             sources.push(s);
@@ -1285,7 +1294,7 @@ async fn rtde_session(
                 let mut types = Vec::new();
                 let mut targets = Vec::new();
                 let mut refused = false;
-                for name in names.split(',') {
+                for name in field_names(names) {
                     match (input_target(name), w.owners.get(name)) {
                         (None, _) => {
                             types.push("NOT_FOUND");
@@ -1304,7 +1313,7 @@ async fn rtde_session(
                 let recipe_id = if refused { 0 } else { next_recipe };
                 if !refused {
                     next_recipe = next_recipe.wrapping_add(1).max(1);
-                    for name in names.split(',') {
+                    for name in field_names(names) {
                         w.owners.insert(name.to_owned(), id);
                     }
                     inputs.insert(recipe_id, targets);

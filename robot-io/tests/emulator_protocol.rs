@@ -1,0 +1,159 @@
+//! The emulator's RTDE and dashboard protocols as a client we did not write sees them (issue
+//! 11): raw packages over loopback TCP to an in-process [`Emulator`], encoded and decoded with
+//! robot-io's codec, so nothing of our own client's behaviour hides a server defect.
+//!
+//! No assertion depends on wall-clock speed: waits are bounded by generous timeouts only.
+
+use std::time::Duration;
+
+use robot_io::codec::{ClientPackage, ControllerPackage};
+use robot_io::emulator::{Emulator, EmulatorConfig, SimBackend};
+use robot_io::sim::{SimConfig, SimRobot};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+
+/// Every test body runs under this bound.
+const TEST_TIMEOUT: Duration = Duration::from_secs(60);
+/// Generous bound on one reply.
+const REPLY_TIMEOUT: Duration = Duration::from_secs(10);
+
+async fn sim_emulator(cfg: EmulatorConfig) -> Emulator {
+    let robot = SimRobot::new(SimConfig::ur5e()).unwrap();
+    Emulator::start(cfg, Box::new(SimBackend::new(robot)))
+        .await
+        .unwrap()
+}
+
+/// A raw RTDE connection: one package out, one package in.
+struct Raw {
+    stream: TcpStream,
+    buf: Vec<u8>,
+}
+
+impl Raw {
+    async fn connect(emu: &Emulator) -> Raw {
+        let stream = TcpStream::connect(emu.rtde_addr()).await.unwrap();
+        stream.set_nodelay(true).unwrap();
+        Raw {
+            stream,
+            buf: Vec::new(),
+        }
+    }
+
+    async fn send(&mut self, pkg: ClientPackage<'_>) {
+        let mut out = Vec::new();
+        pkg.encode(&mut out).unwrap();
+        self.stream.write_all(&out).await.unwrap();
+    }
+
+    /// The next package from the controller (header: u16 big-endian size including the
+    /// header, then the u8 type).
+    async fn recv(&mut self) -> ControllerPackage<'_> {
+        let mut size = [0u8; 2];
+        tokio::time::timeout(REPLY_TIMEOUT, self.stream.read_exact(&mut size))
+            .await
+            .expect("no reply")
+            .unwrap();
+        let n = usize::from(u16::from_be_bytes(size));
+        assert!(n >= 3, "package size {n} below the header length");
+        self.buf.clear();
+        self.buf.extend_from_slice(&size);
+        self.buf.resize(n, 0);
+        tokio::time::timeout(REPLY_TIMEOUT, self.stream.read_exact(&mut self.buf[2..]))
+            .await
+            .expect("truncated package")
+            .unwrap();
+        ControllerPackage::decode(&self.buf).unwrap()
+    }
+
+    /// The next package that is not a text message.
+    async fn recv_non_text(&mut self) -> ControllerPackage<'_> {
+        loop {
+            // Re-borrow per iteration: decode a copy of the kind first.
+            let is_text = matches!(self.recv().await, ControllerPackage::Text(_));
+            if !is_text {
+                return ControllerPackage::decode(&self.buf).unwrap();
+            }
+        }
+    }
+
+    async fn handshake(&mut self) {
+        self.send(ClientPackage::RequestProtocolVersion { version: 2 })
+            .await;
+        assert_eq!(
+            self.recv().await,
+            ControllerPackage::ProtocolVersionAccepted(true)
+        );
+    }
+
+    /// Sets up outputs; returns the recipe id and the answered types.
+    async fn setup_outputs(&mut self, frequency_hz: f64, names: &str) -> (u8, String) {
+        self.send(ClientPackage::SetupOutputs {
+            frequency_hz,
+            names,
+        })
+        .await;
+        match self.recv().await {
+            ControllerPackage::SetupOutputsReply { recipe_id, types } => {
+                (recipe_id, types.to_owned())
+            }
+            other => panic!("expected an output setup reply, got {other:?}"),
+        }
+    }
+
+    /// Sets up inputs; returns the recipe id and the answered types.
+    async fn setup_inputs(&mut self, names: &str) -> (u8, String) {
+        self.send(ClientPackage::SetupInputs { names }).await;
+        match self.recv().await {
+            ControllerPackage::SetupInputsReply { recipe_id, types } => {
+                (recipe_id, types.to_owned())
+            }
+            other => panic!("expected an input setup reply, got {other:?}"),
+        }
+    }
+}
+
+/// A trailing comma (as ur_rtde ends every list) is ignored: the output recipe is accepted
+/// with one type per real name, and so is an input recipe; an unknown name in such a list is
+/// still answered `NOT_FOUND` (for that name only) and refuses the recipe.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_trailing_comma_is_ignored_and_unknown_names_are_still_not_found() {
+    tokio::time::timeout(TEST_TIMEOUT, async {
+        let emu = sim_emulator(EmulatorConfig::ephemeral()).await;
+        let mut c = Raw::connect(&emu).await;
+        c.handshake().await;
+
+        let (id, types) = c
+            .setup_outputs(125.0, "timestamp,actual_q,robot_mode,")
+            .await;
+        assert_eq!(types, "DOUBLE,VECTOR6D,INT32");
+        assert_ne!(id, 0, "a list with a trailing comma was refused");
+
+        let (id, types) = c.setup_outputs(125.0, "timestamp,no_such_field,").await;
+        assert_eq!(types, "DOUBLE,NOT_FOUND");
+        assert_eq!(id, 0);
+
+        let (id, types) = c
+            .setup_inputs("input_int_register_24,input_double_register_24,")
+            .await;
+        assert_eq!(types, "INT32,DOUBLE");
+        assert_ne!(id, 0, "an input list with a trailing comma was refused");
+
+        let (id, types) = c.setup_inputs("input_int_register_25,bogus,").await;
+        assert_eq!(types, "INT32,NOT_FOUND");
+        assert_eq!(id, 0);
+
+        // The accepted output recipe streams with the three fields' sizes.
+        c.send(ClientPackage::Start).await;
+        assert_eq!(
+            c.recv_non_text().await,
+            ControllerPackage::StartAccepted(true)
+        );
+        match c.recv_non_text().await {
+            ControllerPackage::Data(d) => assert_eq!(d.payload.len(), 8 + 48 + 4),
+            other => panic!("expected data, got {other:?}"),
+        }
+    })
+    .await
+    .expect("test timed out");
+}
