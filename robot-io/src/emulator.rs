@@ -1215,7 +1215,11 @@ async fn rtde_session(
         let _ = w.shutdown().await;
     });
     let mut buf = Vec::with_capacity(4096);
-    let mut next_recipe: u8 = 1;
+    // Output and input recipes are numbered separately, each from 1, as a controller numbers
+    // them (ur_rtde expects its first input recipe to be 1 after an output recipe). A refused
+    // recipe gets id 0 and consumes no id.
+    let mut next_output_recipe: u8 = 1;
+    let mut next_input_recipe: u8 = 1;
     let mut inputs: HashMap<u8, Vec<(Target, FieldType)>> = HashMap::new();
     let mut decoded: Vec<Value> = Vec::new();
     loop {
@@ -1262,9 +1266,9 @@ async fn rtde_session(
                 }
                 let valid_freq = frequency_hz > 0.0 && frequency_hz <= MAX_FREQUENCY_HZ;
                 let accepted = valid_freq && sources.len() == types.len();
-                let recipe_id = if accepted { next_recipe } else { 0 };
+                let recipe_id = if accepted { next_output_recipe } else { 0 };
                 if accepted {
-                    next_recipe = next_recipe.wrapping_add(1).max(1);
+                    next_output_recipe = next_output_recipe.wrapping_add(1).max(1);
                     w.streams.retain(|s| s.session != id);
                     let values = sources.iter().map(|_| Value::Double(0.0)).collect();
                     w.streams.push(Stream {
@@ -1310,9 +1314,9 @@ async fn rtde_session(
                         }
                     }
                 }
-                let recipe_id = if refused { 0 } else { next_recipe };
+                let recipe_id = if refused { 0 } else { next_input_recipe };
                 if !refused {
-                    next_recipe = next_recipe.wrapping_add(1).max(1);
+                    next_input_recipe = next_input_recipe.wrapping_add(1).max(1);
                     for name in field_names(names) {
                         w.owners.insert(name.to_owned(), id);
                     }

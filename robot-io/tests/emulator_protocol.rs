@@ -6,7 +6,7 @@
 
 use std::time::Duration;
 
-use robot_io::codec::{ClientPackage, ControllerPackage};
+use robot_io::codec::{ClientPackage, ControllerPackage, DataPackage, FieldType, Value};
 use robot_io::emulator::{Emulator, EmulatorConfig, SimBackend};
 use robot_io::sim::{SimConfig, SimRobot};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -152,6 +152,72 @@ async fn a_trailing_comma_is_ignored_and_unknown_names_are_still_not_found() {
         match c.recv_non_text().await {
             ControllerPackage::Data(d) => assert_eq!(d.payload.len(), 8 + 48 + 4),
             other => panic!("expected data, got {other:?}"),
+        }
+    })
+    .await
+    .expect("test timed out");
+}
+
+/// Output and input recipe ids are numbered separately, each from 1, as a controller numbers
+/// them: after one output recipe (id 1) the first input recipe is 1 and the second 2; a
+/// refused recipe answers id 0 and consumes no id; the second output recipe is 2. Inputs
+/// written to input recipe 1 and 2 reach their registers (echoed in the outputs).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn input_and_output_recipe_ids_are_numbered_separately_from_one() {
+    tokio::time::timeout(TEST_TIMEOUT, async {
+        let emu = sim_emulator(EmulatorConfig::ephemeral()).await;
+        let mut c = Raw::connect(&emu).await;
+        c.handshake().await;
+
+        let (id, _) = c.setup_outputs(125.0, "timestamp").await;
+        assert_eq!(id, 1, "first output recipe");
+        let (id, types) = c.setup_inputs("input_int_register_24").await;
+        assert_eq!((id, types.as_str()), (1, "INT32"), "first input recipe");
+        let (id, types) = c.setup_inputs("input_int_register_25,no_such_input").await;
+        assert_eq!((id, types.as_str()), (0, "INT32,NOT_FOUND"), "refused");
+        let (id, types) = c.setup_inputs("input_double_register_24").await;
+        assert_eq!((id, types.as_str()), (2, "DOUBLE"), "second input recipe");
+        let (id, _) = c.setup_outputs(125.0, "nope").await;
+        assert_eq!(id, 0, "refused output recipe");
+        let (id, types) = c
+            .setup_outputs(125.0, "input_int_register_24,input_double_register_24")
+            .await;
+        assert_eq!(
+            (id, types.as_str()),
+            (2, "INT32,DOUBLE"),
+            "second output recipe"
+        );
+
+        // Each input recipe id addresses its own registers.
+        let mut payload = Vec::new();
+        Value::Int32(7).encode(&mut payload);
+        c.send(ClientPackage::Data(DataPackage {
+            recipe_id: 1,
+            payload: &payload,
+        }))
+        .await;
+        payload.clear();
+        Value::Double(2.5).encode(&mut payload);
+        c.send(ClientPackage::Data(DataPackage {
+            recipe_id: 2,
+            payload: &payload,
+        }))
+        .await;
+        c.send(ClientPackage::Start).await;
+        assert_eq!(
+            c.recv_non_text().await,
+            ControllerPackage::StartAccepted(true)
+        );
+        loop {
+            let ControllerPackage::Data(d) = c.recv_non_text().await else {
+                panic!("expected data");
+            };
+            assert_eq!(d.recipe_id, 2, "the stream is the latest output recipe");
+            let int = Value::decode(FieldType::Int32, d.payload, 0).unwrap();
+            let double = Value::decode(FieldType::Double, d.payload, 4).unwrap();
+            if (int, double) == (Value::Int32(7), Value::Double(2.5)) {
+                break;
+            }
         }
     })
     .await
