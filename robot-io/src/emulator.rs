@@ -538,8 +538,9 @@ struct TraceColumn {
 
 /// Backend streaming a recorded [`Trace`].
 ///
-/// Playback starts at the first row when the first client starts streaming, advances 2 ms per
-/// cycle, and holds the last row after the end. Fields whose columns the trace lacks
+/// Playback starts at the first row when the first client starts streaming (the first
+/// package that client receives is the first row), advances 2 ms per cycle, and holds the
+/// last row after the end. Fields whose columns the trace lacks
 /// (`name`, or `name_0..name_k` for vectors) are answered `NOT_FOUND`; so are names unknown
 /// to RTDE. Commands, programs and inputs are ignored: the state evolves as recorded.
 #[derive(Debug)]
@@ -548,6 +549,9 @@ pub struct TraceBackend {
     mode: ReplayMode,
     columns: Vec<TraceColumn>,
     playing: bool,
+    /// Set when playback starts: the next cycle (the one the first package is sampled in)
+    /// shows the first row instead of advancing past it.
+    at_start: bool,
     t: f64,
     row: usize,
 }
@@ -565,6 +569,7 @@ impl TraceBackend {
             mode,
             columns: Vec::new(),
             playing: false,
+            at_start: false,
             t,
             row: 0,
         })
@@ -659,6 +664,12 @@ impl EmulatorBackend for TraceBackend {
         if !self.playing {
             return;
         }
+        if self.at_start {
+            // The first cycle after the start is the trace's first row: a stream's first
+            // package is sampled in this cycle, so advancing here skipped row 0.
+            self.at_start = false;
+            return;
+        }
         self.t += CYCLE_S;
         while let Some(ts) = self.trace.timestamp(self.row + 1) {
             // Tolerance: recorded periods carry float noise (0.0999999999999 s).
@@ -673,6 +684,7 @@ impl EmulatorBackend for TraceBackend {
     fn stream_started(&mut self) {
         if !self.playing {
             tracing::info!("emulator: {}", self.describe());
+            self.at_start = true;
         }
         self.playing = true;
     }

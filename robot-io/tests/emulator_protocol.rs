@@ -7,8 +7,9 @@
 use std::time::Duration;
 
 use robot_io::codec::{ClientPackage, ControllerPackage, DataPackage, FieldType, Value};
-use robot_io::emulator::{Emulator, EmulatorConfig, SimBackend};
+use robot_io::emulator::{Emulator, EmulatorConfig, ReplayMode, SimBackend, TraceBackend};
 use robot_io::sim::{SimConfig, SimRobot};
+use robot_io::trace::Trace;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 
@@ -217,6 +218,69 @@ async fn input_and_output_recipe_ids_are_numbered_separately_from_one() {
             let double = Value::decode(FieldType::Double, d.payload, 4).unwrap();
             if (int, double) == (Value::Int32(7), Value::Double(2.5)) {
                 break;
+            }
+        }
+    })
+    .await
+    .expect("test timed out");
+}
+
+/// A 500 Hz trace of `rows` rows: timestamp 10 s + k · 2 ms, `speed_scaling` = k (so each
+/// package names the row it came from).
+fn numbered_trace(rows: usize) -> Trace {
+    let mut trace = Trace::new(["timestamp", "speed_scaling"]).unwrap();
+    for k in 0..rows {
+        trace
+            .push_row(&[10.0 + k as f64 * 0.002, k as f64])
+            .unwrap();
+    }
+    trace
+}
+
+/// Trace replay sends the first row: a client streaming a 500 Hz trace at 500 Hz receives
+/// rows 0, 1, 2, … in order (it used to start at row 1): bit for bit when holding; when
+/// interpolating, the first row bit for bit and the rest up to float rounding.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn trace_replay_sends_the_first_row_first() {
+    tokio::time::timeout(TEST_TIMEOUT, async {
+        let trace = numbered_trace(50);
+        for mode in [ReplayMode::Hold, ReplayMode::Interpolate] {
+            let backend = TraceBackend::new(trace.clone(), mode).unwrap();
+            let emu = Emulator::start(EmulatorConfig::ephemeral(), Box::new(backend))
+                .await
+                .unwrap();
+            let mut c = Raw::connect(&emu).await;
+            c.handshake().await;
+            let (id, types) = c.setup_outputs(500.0, "timestamp,speed_scaling,").await;
+            assert_eq!((id, types.as_str()), (1, "DOUBLE,DOUBLE"));
+            c.send(ClientPackage::Start).await;
+            assert_eq!(
+                c.recv_non_text().await,
+                ControllerPackage::StartAccepted(true)
+            );
+            for k in 0..10 {
+                let ControllerPackage::Data(d) = c.recv_non_text().await else {
+                    panic!("expected data");
+                };
+                let ts = Value::decode(FieldType::Double, d.payload, 0).unwrap();
+                let row = Value::decode(FieldType::Double, d.payload, 8).unwrap();
+                let expected = (
+                    Value::Double(trace.timestamp(k).unwrap()),
+                    Value::Double(k as f64),
+                );
+                if mode == ReplayMode::Hold || k == 0 {
+                    assert_eq!((ts, row), expected, "{mode:?}: package {k}");
+                } else {
+                    // Interpolation runs on the virtual clock (a sum of 2 ms steps): equal
+                    // up to float rounding.
+                    let near = |a: Value, b: Value| {
+                        (a.component(0).unwrap() - b.component(0).unwrap()).abs() < 1e-9
+                    };
+                    assert!(
+                        near(ts, expected.0) && near(row, expected.1),
+                        "{mode:?}: package {k}: {ts:?}, {row:?}"
+                    );
+                }
             }
         }
     })
