@@ -3,7 +3,10 @@
 //! register protocol) or [`TraceBackend`] (a recorded [`Trace`]).
 //!
 //! One world task steps the backend in 2 ms controller cycles on a virtual clock: it runs
-//! `speedup` cycles per 2 ms of wall time (1 = real time; tests speed it up). Each RTDE session
+//! `speedup` cycles per 2 ms of wall time (1 = real time; tests speed it up). The clock keeps
+//! absolute ticks (tick n is due at start + n · 2 ms) and catches up after missed ones, within
+//! a bound per wake ([`plan_ticks`]); [`Emulator::clock_stats`] reports how far it fell behind.
+//! Each RTDE session
 //! is sampled from the virtual clock at its requested frequency, so what a client receives
 //! depends on virtual cycles only, not on scheduling jitter.
 //!
@@ -77,6 +80,72 @@ pub struct EmulatorConfig {
 /// the 2 ms, and a client reading every sample (500 × speedup per second) already skips most
 /// of them; a huge value kept the emulator busy for ever (issue 10: 4294967295 hung it).
 pub const MAX_SPEEDUP: u32 = 100;
+
+/// The most controller cycles one wake of the emulator's clock runs when catching up [-]:
+/// 1000 (2 s of virtual time). See [`max_ticks_per_wake`].
+pub const MAX_CATCH_UP_CYCLES: u64 = 1000;
+
+/// The most 2 ms wall-clock ticks one wake of the emulator's clock runs [-]: 50 (100 ms of
+/// wall time). See [`max_ticks_per_wake`].
+pub const MAX_CATCH_UP_TICKS: u64 = 50;
+
+/// The bound on ticks run in one wake of the clock at `speedup` [ticks]: as many as fit in
+/// [`MAX_CATCH_UP_CYCLES`] cycles, at most [`MAX_CATCH_UP_TICKS`] (100 ms of wall time), at
+/// least 1. So at speedup 1 a stall of up to 100 ms is caught up in one burst of at most 50
+/// cycles, at speedup 100 one of up to 20 ms in at most 1000 cycles; ticks due beyond the
+/// bound are dropped (counted in [`ClockStats::cycles_dropped`]), so a long stall (a stopped
+/// process, a loaded CI machine) never runs thousands of cycles while holding the emulator's
+/// state and flooding every client's queue.
+pub fn max_ticks_per_wake(speedup: u32) -> u64 {
+    (MAX_CATCH_UP_CYCLES / u64::from(speedup.max(1))).clamp(1, MAX_CATCH_UP_TICKS)
+}
+
+/// What one wake of the emulator's clock does ([`plan_ticks`]), in 2 ms wall-clock ticks
+/// (each runs `speedup` controller cycles).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct TickPlan {
+    /// Ticks to run now [ticks].
+    pub run: u64,
+    /// Of those, ticks run late: due before the newest due tick, i.e. catching up [ticks].
+    pub late: u64,
+    /// Ticks due beyond the per-wake bound: skipped, never run [ticks].
+    pub dropped: u64,
+}
+
+/// The clock's schedule for one wake: `due` ticks are due since the start (wall time elapsed
+/// / 2 ms, rounded down), `done` have been run or dropped before, and at most `max_per_wake`
+/// (taken as at least 1) run now. The rest of the backlog is dropped, so after this wake
+/// `done + run + dropped == due` whenever `due >= done`.
+pub fn plan_ticks(due: u64, done: u64, max_per_wake: u64) -> TickPlan {
+    let behind = due.saturating_sub(done);
+    let run = behind.min(max_per_wake.max(1));
+    TickPlan {
+        run,
+        late: run.saturating_sub(1),
+        dropped: behind - run,
+    }
+}
+
+/// How the emulator's clock kept up with wall time ([`Emulator::clock_stats`]), in controller
+/// cycles (a 2 ms wall-clock tick is `speedup` cycles). As of the clock's last wake,
+/// `cycles_run + cycles_dropped + cycles_paused == ticks_elapsed × speedup` exactly.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ClockStats {
+    /// 2 ms wall-clock ticks elapsed since the start, as of the clock's last wake [ticks].
+    pub ticks_elapsed: u64,
+    /// Cycles run [cycles] (the virtual clock, [`Emulator::cycle`]).
+    pub cycles_run: u64,
+    /// Cycles run late, in a catch-up burst after missed ticks [cycles].
+    pub cycles_late: u64,
+    /// Cycles due beyond the per-wake bound ([`max_ticks_per_wake`]) and never run: how far
+    /// the virtual clock fell behind wall time × speedup for good [cycles].
+    pub cycles_dropped: u64,
+    /// Cycles not run because the emulator was paused ([`Emulator::pause`]; by design, not
+    /// lateness) [cycles].
+    pub cycles_paused: u64,
+    /// The largest backlog seen at one wake, before catching up [cycles] (speedup on time).
+    pub max_behind_cycles: u64,
+}
 
 impl Default for EmulatorConfig {
     fn default() -> Self {
@@ -773,6 +842,8 @@ struct World {
     silent: bool,
     /// Frozen by [`Emulator::pause`]: no cycle runs, nothing is sent.
     paused: bool,
+    /// The clock's bookkeeping (cycles run, late, dropped, paused).
+    clock: ClockStats,
     stall_timeout: Duration,
 }
 
@@ -997,6 +1068,7 @@ impl Emulator {
             cycle: 0,
             silent: false,
             paused: false,
+            clock: ClockStats::default(),
             stall_timeout: cfg.stall_timeout,
         }));
         let cfg = Arc::new(cfg);
@@ -1053,6 +1125,12 @@ impl Emulator {
     /// Virtual controller cycles run so far.
     pub fn cycle(&self) -> u64 {
         lock(&self.world).cycle
+    }
+
+    /// How the virtual clock kept up with wall time: cycles run, run late (catching up),
+    /// dropped (beyond the per-wake bound) and skipped while paused, all read at once.
+    pub fn clock_stats(&self) -> ClockStats {
+        lock(&self.world).clock
     }
 
     /// Scripts received on the script ports so far.
@@ -1138,18 +1216,47 @@ impl Drop for Emulator {
     }
 }
 
+/// One 2 ms wall-clock tick [ns].
+const TICK_NS: u64 = 2_000_000;
+
+/// The clock: tick n is due at start + n · 2 ms (absolute, so lateness does not accumulate as
+/// it did with a delayed interval: under load the virtual clock ran at 0.56–0.85 of wall
+/// time). Each wake runs the ticks due since the last one, within [`max_ticks_per_wake`];
+/// while paused, due ticks are skipped and counted as paused.
 async fn ticker(world: Arc<Mutex<World>>, speedup: u32) {
-    let mut interval = tokio::time::interval(Duration::from_secs_f64(CYCLE_S));
-    interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let speedup_cycles = u64::from(speedup);
+    let max = max_ticks_per_wake(speedup);
+    let start = tokio::time::Instant::now();
+    let mut done: u64 = 0;
     loop {
-        interval.tick().await;
+        let next = start + Duration::from_nanos(TICK_NS.saturating_mul(done.saturating_add(1)));
+        tokio::time::sleep_until(next).await;
+        let elapsed = u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        let due = (elapsed / TICK_NS).max(done);
         let mut w = lock(&world);
+        w.clock.ticks_elapsed = due;
         if w.paused {
+            w.clock.cycles_paused += (due - done) * speedup_cycles;
+            done = due;
             continue;
         }
-        for _ in 0..speedup {
+        let plan = plan_ticks(due, done, max);
+        w.clock.max_behind_cycles = w.clock.max_behind_cycles.max((due - done) * speedup_cycles);
+        for _ in 0..plan.run * speedup_cycles {
             w.step();
         }
+        w.clock.cycles_run += plan.run * speedup_cycles;
+        w.clock.cycles_late += plan.late * speedup_cycles;
+        w.clock.cycles_dropped += plan.dropped * speedup_cycles;
+        if plan.dropped > 0 {
+            tracing::warn!(
+                "emulator: clock {} ms behind wall time; dropped {} cycles (at most {max} \
+                 ticks caught up per wake)",
+                (due - done) * TICK_NS / 1_000_000,
+                plan.dropped * speedup_cycles
+            );
+        }
+        done = due;
     }
 }
 

@@ -7,7 +7,10 @@
 use std::time::Duration;
 
 use robot_io::codec::{ClientPackage, ControllerPackage, DataPackage, FieldType, Value};
-use robot_io::emulator::{Emulator, EmulatorConfig, ReplayMode, SimBackend, TraceBackend};
+use robot_io::emulator::{
+    ClockStats, Emulator, EmulatorConfig, ReplayMode, SimBackend, TickPlan, TraceBackend,
+    max_ticks_per_wake, plan_ticks,
+};
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::trace::Trace;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -283,6 +286,102 @@ async fn trace_replay_sends_the_first_row_first() {
                 }
             }
         }
+    })
+    .await
+    .expect("test timed out");
+}
+
+/// The clock's per-wake schedule, with exact numbers: on time one tick runs; after missed
+/// ticks the backlog runs (all but the newest late); beyond the bound the excess is dropped,
+/// never deferred; nothing is due, nothing runs. `done + run + dropped == due` throughout.
+#[test]
+fn the_clock_catches_up_missed_ticks_within_the_bound_and_counts_the_rest_dropped() {
+    let plan = |run, late, dropped| TickPlan { run, late, dropped };
+    assert_eq!(plan_ticks(1, 0, 50), plan(1, 0, 0), "on time");
+    assert_eq!(plan_ticks(10, 10, 50), plan(0, 0, 0), "nothing due");
+    assert_eq!(plan_ticks(17, 10, 50), plan(7, 6, 0), "caught up");
+    assert_eq!(plan_ticks(60, 10, 50), plan(50, 49, 0), "exactly the bound");
+    assert_eq!(plan_ticks(1010, 10, 50), plan(50, 49, 950), "a 2 s stall");
+    assert_eq!(
+        plan_ticks(5, 3, 0),
+        plan(1, 0, 1),
+        "a bound of 0 counts as 1"
+    );
+    assert_eq!(plan_ticks(3, 5, 50), plan(0, 0, 0), "done ahead of due");
+    for (due, done) in [(0, 0), (1, 0), (17, 10), (1010, 10), (u64::MAX, 0)] {
+        let p = plan_ticks(due, done, 50);
+        assert_eq!(done + p.run + p.dropped, due, "due {due}, done {done}");
+    }
+    // The bound: 100 ms of wall time, and at most 1000 cycles.
+    assert_eq!(max_ticks_per_wake(1), 50);
+    assert_eq!(max_ticks_per_wake(20), 50);
+    assert_eq!(max_ticks_per_wake(40), 25);
+    assert_eq!(max_ticks_per_wake(100), 10);
+    assert_eq!(max_ticks_per_wake(u32::MAX), 1);
+}
+
+/// Checks the clock invariants of [`ClockStats`] on `s` at `speedup`.
+fn consistent(s: ClockStats, speedup: u64) -> ClockStats {
+    assert_eq!(
+        s.cycles_run + s.cycles_dropped + s.cycles_paused,
+        s.ticks_elapsed * speedup,
+        "{s:?}"
+    );
+    assert!(s.cycles_late <= s.cycles_run, "{s:?}");
+    assert_eq!(s.cycles_run % speedup, 0, "whole ticks run: {s:?}");
+    s
+}
+
+/// Polls the clock (every millisecond) until `cond` holds, checking its invariants at every
+/// read; the caller's timeout bounds it.
+async fn clock_until(
+    emu: &Emulator,
+    speedup: u64,
+    cond: impl Fn(ClockStats) -> bool,
+) -> ClockStats {
+    loop {
+        let s = consistent(emu.clock_stats(), speedup);
+        if cond(s) {
+            return s;
+        }
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
+}
+
+/// The emulator's clock counters stay consistent through a pause: at every read, cycles run
+/// + dropped + paused is exactly the wall-clock ticks elapsed × speedup; while paused no
+/// cycle runs and the skipped ticks count as paused (not late, not dropped); after resuming
+/// cycles run again and nothing more counts as paused. No wall-clock threshold is asserted.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn clock_counters_are_consistent_through_pause_and_resume() {
+    const SPEEDUP: u64 = 3;
+    tokio::time::timeout(TEST_TIMEOUT, async {
+        let emu = sim_emulator(EmulatorConfig {
+            speedup: SPEEDUP as u32,
+            ..EmulatorConfig::ephemeral()
+        })
+        .await;
+        let running = clock_until(&emu, SPEEDUP, |s| s.cycles_run > 0).await;
+        assert_eq!(running.cycles_paused, 0);
+        assert!(emu.cycle() >= running.cycles_run);
+
+        emu.pause();
+        let first = clock_until(&emu, SPEEDUP, |s| s.cycles_paused > 0).await;
+        let later = clock_until(&emu, SPEEDUP, |s| s.cycles_paused > first.cycles_paused).await;
+        assert_eq!(
+            later.cycles_run, first.cycles_run,
+            "a cycle ran while paused"
+        );
+        assert_eq!(emu.cycle(), later.cycles_run);
+
+        emu.resume();
+        let resumed = clock_until(&emu, SPEEDUP, |s| s.cycles_run > later.cycles_run).await;
+        let after = clock_until(&emu, SPEEDUP, |s| s.cycles_run > resumed.cycles_run).await;
+        assert_eq!(
+            after.cycles_paused, resumed.cycles_paused,
+            "ticks counted as paused after resuming"
+        );
+        assert!(emu.cycle() >= after.cycles_run);
     })
     .await
     .expect("test timed out");
