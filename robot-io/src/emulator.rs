@@ -1555,15 +1555,34 @@ async fn serve_dashboard(
         tokio::spawn(async move {
             running(&mut paused).await;
             let (r, mut w) = stream.into_split();
-            let mut lines = BufReader::new(r).lines();
+            let mut r = BufReader::new(r);
+            let mut bytes = Vec::with_capacity(256);
             if w.write_all(b"Connected: Universal Robots Dashboard Server\n")
                 .await
                 .is_err()
             {
                 return;
             }
-            while let Ok(Some(line)) = lines.next_line().await {
+            loop {
+                let read = read_dashboard_line(&mut r, &mut bytes, MAX_DASHBOARD_LINE).await;
                 running(&mut paused).await;
+                let line = match read {
+                    Ok(DashboardLine::Line) => String::from_utf8_lossy(&bytes),
+                    Ok(DashboardLine::TooLong { ended }) => {
+                        let reply = format!(
+                            "could not understand: line longer than {MAX_DASHBOARD_LINE} bytes \
+                             (discarded)\n"
+                        );
+                        if w.write_all(reply.as_bytes()).await.is_err() {
+                            break;
+                        }
+                        if !ended && skip_dashboard_line(&mut r).await.is_err() {
+                            break;
+                        }
+                        continue;
+                    }
+                    Ok(DashboardLine::Eof) | Err(_) => break,
+                };
                 let cmd = DashboardCommand::parse(&line);
                 let reply = match cmd {
                     Some(c) => lock(&world).backend.dashboard(c),
@@ -1576,6 +1595,86 @@ async fn serve_dashboard(
                 }
             }
         });
+    }
+}
+
+/// The longest dashboard command line the emulator reads [bytes], without its line end:
+/// 4096 (a controller's commands are short; `load <program>` with a long path is the
+/// longest). A longer line is answered `could not understand: line longer than 4096 bytes
+/// (discarded)` as soon as it overflows, and the rest of it, up to its newline, is read and
+/// dropped without being kept: a client sending 64 MiB without a newline costs the emulator
+/// no memory beyond this bound and the reader's buffer.
+pub const MAX_DASHBOARD_LINE: usize = 4096;
+
+/// What [`read_dashboard_line`] read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum DashboardLine {
+    /// A whole line (or the last, unterminated one before the end of the stream).
+    Line,
+    /// A line longer than the bound; `ended`: its newline has been read too (otherwise the
+    /// caller skips the rest with [`skip_dashboard_line`]).
+    TooLong { ended: bool },
+    /// The stream ended with no more bytes.
+    Eof,
+}
+
+/// Reads one line into `line` (without its `\n` or `\r\n`), keeping at most `max` bytes
+/// (a `\r` before the newline counts).
+async fn read_dashboard_line<R: tokio::io::AsyncBufRead + Unpin>(
+    r: &mut R,
+    line: &mut Vec<u8>,
+    max: usize,
+) -> std::io::Result<DashboardLine> {
+    line.clear();
+    loop {
+        let avail = r.fill_buf().await?;
+        if avail.is_empty() {
+            return Ok(if line.is_empty() {
+                DashboardLine::Eof
+            } else {
+                DashboardLine::Line
+            });
+        }
+        let newline = avail.iter().position(|b| *b == b'\n');
+        let chunk = avail
+            .get(..newline.unwrap_or(avail.len()))
+            .unwrap_or_default();
+        let used = newline.map_or(avail.len(), |i| i + 1);
+        if line.len() + chunk.len() > max {
+            r.consume(used);
+            line.clear();
+            return Ok(DashboardLine::TooLong {
+                ended: newline.is_some(),
+            });
+        }
+        line.extend_from_slice(chunk);
+        r.consume(used);
+        if newline.is_some() {
+            if line.last() == Some(&b'\r') {
+                line.pop();
+            }
+            return Ok(DashboardLine::Line);
+        }
+    }
+}
+
+/// Reads and drops bytes up to and including the next newline (or the end of the stream).
+async fn skip_dashboard_line<R: tokio::io::AsyncBufRead + Unpin>(r: &mut R) -> std::io::Result<()> {
+    loop {
+        let avail = r.fill_buf().await?;
+        if avail.is_empty() {
+            return Ok(());
+        }
+        match avail.iter().position(|b| *b == b'\n') {
+            Some(i) => {
+                r.consume(i + 1);
+                return Ok(());
+            }
+            None => {
+                let n = avail.len();
+                r.consume(n);
+            }
+        }
     }
 }
 

@@ -1,6 +1,6 @@
 //! The emulator's RTDE and dashboard protocols as a client we did not write sees them (issue
 //! 11): raw packages over loopback TCP to an in-process [`Emulator`], encoded and decoded with
-//! robot-io's codec, so nothing of our own client's behaviour hides a server defect.
+//! robot-io's codec, and dashboard lines by hand, so nothing of our own client's behaviour hides a server defect.
 //!
 //! No assertion depends on wall-clock speed: waits are bounded by generous timeouts only.
 
@@ -8,12 +8,12 @@ use std::time::Duration;
 
 use robot_io::codec::{ClientPackage, ControllerPackage, DataPackage, FieldType, Value};
 use robot_io::emulator::{
-    ClockStats, Emulator, EmulatorConfig, ReplayMode, SimBackend, TickPlan, TraceBackend,
-    max_ticks_per_wake, plan_ticks,
+    ClockStats, Emulator, EmulatorConfig, MAX_DASHBOARD_LINE, ReplayMode, SimBackend, TickPlan,
+    TraceBackend, max_ticks_per_wake, plan_ticks,
 };
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::trace::Trace;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
 use tokio::net::TcpStream;
 
 /// Every test body runs under this bound.
@@ -382,6 +382,85 @@ async fn clock_counters_are_consistent_through_pause_and_resume() {
             "ticks counted as paused after resuming"
         );
         assert!(emu.cycle() >= after.cycles_run);
+    })
+    .await
+    .expect("test timed out");
+}
+
+/// A dashboard connection: the greeting read, then one line per reply.
+struct Dash {
+    r: BufReader<tokio::net::tcp::OwnedReadHalf>,
+    w: tokio::net::tcp::OwnedWriteHalf,
+}
+
+impl Dash {
+    async fn connect(emu: &Emulator) -> Dash {
+        let (r, w) = TcpStream::connect(emu.dashboard_addr())
+            .await
+            .unwrap()
+            .into_split();
+        let mut d = Dash {
+            r: BufReader::new(r),
+            w,
+        };
+        assert_eq!(
+            d.line().await,
+            "Connected: Universal Robots Dashboard Server"
+        );
+        d
+    }
+
+    async fn line(&mut self) -> String {
+        let mut s = String::new();
+        let n = tokio::time::timeout(REPLY_TIMEOUT, self.r.read_line(&mut s))
+            .await
+            .expect("no dashboard reply")
+            .unwrap();
+        assert!(n > 0, "the dashboard closed the connection");
+        s.trim_end_matches('\n').to_owned()
+    }
+
+    async fn send(&mut self, bytes: &[u8]) {
+        self.w.write_all(bytes).await.unwrap();
+    }
+}
+
+/// The dashboard bounds a line at 4096 bytes: a 4096-byte unknown command is answered as
+/// unknown (echoed whole); 1 MiB without a newline is answered once, as soon as it overflows,
+/// with an error line, and the rest of it up to its newline is discarded, so the next command
+/// on the same connection (and on a new one) is answered normally. Memory cannot be measured
+/// here: the bound shows in the reply (an unbounded reader would only answer at the newline,
+/// after buffering the whole MiB, and would then echo it).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_dashboard_bounds_a_line_and_discards_the_rest_of_an_overlong_one() {
+    tokio::time::timeout(TEST_TIMEOUT, async {
+        let emu = sim_emulator(EmulatorConfig::ephemeral()).await;
+        assert_eq!(MAX_DASHBOARD_LINE, 4096);
+        let mut d = Dash::connect(&emu).await;
+
+        let at_bound = "x".repeat(MAX_DASHBOARD_LINE);
+        d.send(format!("{at_bound}\n").as_bytes()).await;
+        assert_eq!(
+            d.line().await,
+            format!("could not understand: '{at_bound}'")
+        );
+
+        d.send(&vec![b'a'; 1 << 20]).await;
+        // Answered before the newline is sent.
+        assert_eq!(
+            d.line().await,
+            "could not understand: line longer than 4096 bytes (discarded)"
+        );
+        d.send(b"aaaa\nrobotmode\n").await;
+        let reply = d.line().await;
+        assert!(reply.starts_with("Robotmode: "), "{reply}");
+        d.send(b"is in remote control\r\n").await;
+        assert_eq!(d.line().await, "true");
+
+        let mut fresh = Dash::connect(&emu).await;
+        fresh.send(b"robotmode\n").await;
+        let reply = fresh.line().await;
+        assert!(reply.starts_with("Robotmode: "), "{reply}");
     })
     .await
     .expect("test timed out");
