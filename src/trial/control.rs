@@ -14,8 +14,8 @@
 //! the "never blocks longer than one cycle" point of issue 10 is not met yet, and no test claims
 //! it. The supervisor's send is the RTDE client's non-blocking register write.
 //!
-//! Still on the runtime's one thread (issue 10, deliverable 2, open): the camera-rate cue
-//! cycle and the ring's drain run between control cycles; neither has its own thread yet.
+//! On an RTDE robot the cycle runs on its own thread and logs into a [`super::log::ControlLog`]
+//! (see the runtime's module docs); on the mock clock it logs straight into the trial log.
 
 use adapt::controller::{Controller, MotionAdaptation, OperatorView};
 use adapt::task::{Phase, TaskEventKind};
@@ -24,7 +24,7 @@ use robot_io::{JointCommand, RobotState};
 use safety::{Supervisor, SupervisorConfig, Verdict, WorldView};
 
 use super::events::TrialEvent;
-use super::log::{CycleRecord, TrialLog};
+use super::log::{ControlSink, CycleRecord};
 use super::runtime::{TrialRobot, phase_name};
 
 /// How long a supervisor verdict (reaction, requirement) must hold before it is logged as a
@@ -104,10 +104,10 @@ impl<R: TrialRobot> ControlCycle<R> {
     }
 
     /// Controller → supervisor → send → log ring, for the state read last.
-    pub(crate) fn act(
+    pub(crate) fn act<L: ControlSink>(
         &mut self,
         input: &CycleInput<'_>,
-        log: &mut TrialLog,
+        log: &mut L,
     ) -> anyhow::Result<CycleOutput> {
         let t = input.t_s;
         let perception_age_s = (t - input.cue_t_s).max(0.0);

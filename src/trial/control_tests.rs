@@ -39,7 +39,10 @@ fn operator() -> HumanBody {
 }
 
 /// Runs `cycles` control cycles of handovers on `robot`; `mock` takes trial time from the cycle
-/// count (the simulated robot), otherwise from the robot's clock (RTDE).
+/// count and logs straight into the trial log (the simulated robot: the lockstep path);
+/// otherwise time is the robot's clock, each cycle also exchanges with the cue handoffs, and it
+/// logs into a [`ControlLog`] that the trial log absorbs between cycles (RTDE: the control
+/// thread's path).
 fn run_handovers<R: TrialRobot>(
     robot: R,
     setup: Setup,
@@ -65,6 +68,9 @@ fn run_handovers<R: TrialRobot>(
         robot: "test".into(),
     };
     let mut log = TrialLog::create(out, &meta, LogOptions::default()).unwrap();
+    let (mut control_log, mut reader) = ControlLog::new(8192);
+    // The control thread's end of the cue handoffs (the cue side is not run here).
+    let (mut link, _to_cue, _from_cue) = threaded::handoffs();
     let motion = MotionAdaptation::default();
     let humans = operator();
     let mut run = Run {
@@ -109,7 +115,17 @@ fn run_handovers<R: TrialRobot>(
                 latency_s: None,
                 wake_jitter_s: None,
             };
-            cc.act(&input, &mut log).unwrap();
+            if mock {
+                cc.act(&input, &mut log).unwrap();
+            } else {
+                let snapshot = RobotSnapshot {
+                    t_s: t,
+                    done: 0,
+                    ..RobotSnapshot::default()
+                };
+                link.exchange(&snapshot, &mut control_log).unwrap();
+                cc.act(&input, &mut control_log).unwrap();
+            }
         });
         run.allocations += n;
         if n > 0 && run.allocating_cycles.len() < 10 {
@@ -125,10 +141,15 @@ fn run_handovers<R: TrialRobot>(
             .peak_tcp_m_s
             .max((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt());
         if k % 16 == 15 {
+            log.absorb(&mut reader).unwrap();
             log.drain_ring().unwrap();
         }
     }
-    log.finish().unwrap();
+    log.absorb(&mut reader).unwrap();
+    let files = log.finish().unwrap();
+    assert_eq!(files.dropped_records, 0, "no control-rate record lost");
+    let commands = files.message_counts.get("/robot/command").copied();
+    assert_eq!(commands, Some(cycles), "every command logged");
     run
 }
 

@@ -39,15 +39,16 @@
 //! The control-rate methods only copy a `Copy` record into a ring preallocated at
 //! [`TrialLog::create`] ([`LogOptions::ring_capacity`] records) and update the streaming
 //! motion metrics (`motion_metrics.rs`: O(1) per record, buffers preallocated): no allocation,
-//! no formatting, no I/O. The ring is drained (formatted, compressed, written) by the next camera-rate call, and
-//! by [`TrialLog::finish`]. This is a **buffered synchronous writer**: right for the simulated
-//! trial (one thread, mock clock), where draining happens between control cycles. Should the
-//! ring fill before a camera-rate call drains it, the control-rate call drains it itself (counted
-//! in [`TrialFiles::synchronous_drains`]). For a real-robot runtime with its own control thread,
-//! the plan (ARCHITECTURE.md, "Not yet as designed": a log-writer thread draining a
-//! preallocated ring from the control thread) is to move the drain behind a single-producer ring
-//! of the same records; the record type and the drain are written so that only the hand-off
-//! changes.
+//! no formatting, no I/O. The ring is drained (formatted, compressed, written) by the next
+//! camera-rate call, and by [`TrialLog::finish`]; should it fill before, the control-rate call
+//! drains it itself (counted in [`TrialFiles::synchronous_drains`]). That is the lockstep path
+//! (`--robot sim`, one thread).
+//!
+//! In real time the control cycle runs on its own thread and logs through a [`ControlLog`]
+//! instead: the same records into a wait-free single-producer ring, never blocking; the thread
+//! that owns the trial log calls [`TrialLog::absorb`], which feeds each record through the same
+//! path as the control-rate methods (metrics, decimation, ring). A full [`ControlLog`] drops and
+//! counts ([`TrialFiles::dropped_records`]); the runtime turns any loss into an `error` ending.
 
 #[path = "log_mcap.rs"]
 pub(crate) mod mcap_out;
@@ -169,6 +170,8 @@ pub(crate) struct TrialFiles {
     pub(crate) message_counts: BTreeMap<String, u64>,
     /// Times a control-rate call found the ring full and drained it itself.
     pub(crate) synchronous_drains: u64,
+    /// Control-rate records lost because a [`ControlLog`]'s ring was full (0 in a sound run).
+    pub(crate) dropped_records: u64,
 }
 
 /// A control-rate record, copied into the ring as is.
@@ -183,6 +186,96 @@ enum HotRecord {
     Event(f64, TrialEvent),
     /// The cycle record and the cycle's executed jerk, max over the joints of |j| [rad/s³].
     Cycle(f64, CycleRecord, Option<f64>),
+}
+
+/// Where the control cycle logs: the trial log itself (one thread: the mock clock) or a
+/// [`ControlLog`] (the control thread's end of a wait-free ring; real time). Every method
+/// copies a `Copy` record; none allocates or does I/O.
+pub(crate) trait ControlSink {
+    /// See [`TrialLog::robot_state`].
+    fn robot_state(&mut self, t_s: f64, state: &RobotState) -> anyhow::Result<()>;
+    /// See [`TrialLog::command`].
+    fn command(&mut self, t_s: f64, cmd: &JointCommand, verdict: &Verdict) -> anyhow::Result<()>;
+    /// See [`TrialLog::cycle`].
+    fn cycle(&mut self, t_s: f64, rec: &CycleRecord) -> anyhow::Result<()>;
+    /// See [`TrialLog::human_distance`].
+    fn human_distance(&mut self, t_s: f64, min_distance_m: Option<f64>) -> anyhow::Result<()>;
+    /// See [`TrialLog::event`].
+    fn event(&mut self, t_s: f64, event: &TrialEvent) -> anyhow::Result<()>;
+}
+
+impl ControlSink for TrialLog {
+    fn robot_state(&mut self, t_s: f64, state: &RobotState) -> anyhow::Result<()> {
+        TrialLog::robot_state(self, t_s, state)
+    }
+    fn command(&mut self, t_s: f64, cmd: &JointCommand, verdict: &Verdict) -> anyhow::Result<()> {
+        TrialLog::command(self, t_s, cmd, verdict)
+    }
+    fn cycle(&mut self, t_s: f64, rec: &CycleRecord) -> anyhow::Result<()> {
+        TrialLog::cycle(self, t_s, rec)
+    }
+    fn human_distance(&mut self, t_s: f64, min_distance_m: Option<f64>) -> anyhow::Result<()> {
+        TrialLog::human_distance(self, t_s, min_distance_m)
+    }
+    fn event(&mut self, t_s: f64, event: &TrialEvent) -> anyhow::Result<()> {
+        TrialLog::event(self, t_s, event)
+    }
+}
+
+/// The control thread's end of the log: a wait-free single-producer ring of control-rate
+/// records, preallocated, read by [`TrialLog::absorb`] on the thread that owns the trial log.
+/// A push never blocks and never allocates; when the ring is full the record is dropped and
+/// counted (`summary.json`: `log.dropped_records`, which a trial's tests require to be 0).
+pub(crate) struct ControlLog {
+    producer: rtrb::Producer<HotRecord>,
+    dropped: std::sync::Arc<std::sync::atomic::AtomicU64>,
+}
+
+/// The reading end of a [`ControlLog`].
+pub(crate) struct ControlLogReader {
+    consumer: rtrb::Consumer<HotRecord>,
+    dropped: std::sync::Arc<std::sync::atomic::AtomicU64>,
+}
+
+impl ControlLog {
+    /// A ring of `capacity` records [-] (a few seconds of the control rate: 4 records a cycle).
+    pub(crate) fn new(capacity: usize) -> (ControlLog, ControlLogReader) {
+        let (producer, consumer) = rtrb::RingBuffer::new(capacity.max(1));
+        let dropped = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+        (
+            ControlLog {
+                producer,
+                dropped: dropped.clone(),
+            },
+            ControlLogReader { consumer, dropped },
+        )
+    }
+
+    fn push(&mut self, rec: HotRecord) -> anyhow::Result<()> {
+        if self.producer.push(rec).is_err() {
+            self.dropped
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        }
+        Ok(())
+    }
+}
+
+impl ControlSink for ControlLog {
+    fn robot_state(&mut self, t_s: f64, state: &RobotState) -> anyhow::Result<()> {
+        self.push(HotRecord::State(t_s, *state))
+    }
+    fn command(&mut self, t_s: f64, cmd: &JointCommand, verdict: &Verdict) -> anyhow::Result<()> {
+        self.push(HotRecord::Command(t_s, *cmd, *verdict))
+    }
+    fn cycle(&mut self, t_s: f64, rec: &CycleRecord) -> anyhow::Result<()> {
+        self.push(HotRecord::Cycle(t_s, *rec, None))
+    }
+    fn human_distance(&mut self, t_s: f64, min_distance_m: Option<f64>) -> anyhow::Result<()> {
+        self.push(HotRecord::Distance(t_s, min_distance_m))
+    }
+    fn event(&mut self, t_s: f64, event: &TrialEvent) -> anyhow::Result<()> {
+        self.push(HotRecord::Event(t_s, *event))
+    }
 }
 
 /// What the report plots of one adaptation [-] and [s].
@@ -300,6 +393,8 @@ pub(crate) struct TrialLog {
     next_chunk_t: f64,
     recorded: Recorded,
     synchronous_drains: u64,
+    /// Control-rate records a [`ControlLog`] could not queue (its ring was full).
+    dropped_records: u64,
 }
 
 impl std::fmt::Debug for TrialLog {
@@ -393,6 +488,7 @@ impl TrialLog {
             next_chunk_t: 0.0,
             recorded: Recorded::default(),
             synchronous_drains: 0,
+            dropped_records: 0,
         };
         let meta_json = serde_json::to_vec(meta)?;
         log.write(ch::META, 0.0, &meta_json)?;
@@ -566,15 +662,55 @@ impl TrialLog {
         self.maybe_close_chunk(t_s)
     }
 
+    /// Takes one control-rate record: the motion metrics see every record, in order; the
+    /// state and distance streams are decimated; the record is copied into the ring. No
+    /// allocation, no I/O (unless the ring is full). The control-rate methods below and
+    /// [`TrialLog::absorb`] (records from a [`ControlLog`]) both come here, so a record has the
+    /// same effect whichever way it arrives.
+    fn ingest(&mut self, rec: HotRecord) -> anyhow::Result<()> {
+        match rec {
+            HotRecord::State(t_s, ref state) => {
+                self.motion.on_state(t_s, state);
+                if self.options.robot_full_rate || self.state_decimator.keep(t_s) {
+                    self.push(rec)?;
+                }
+                Ok(())
+            }
+            HotRecord::Command(t_s, _, ref verdict) => {
+                self.motion.on_verdict(t_s, verdict);
+                self.push(rec)
+            }
+            HotRecord::Cycle(t_s, ref cycle, _) => {
+                self.motion.on_cycle(t_s, cycle);
+                let jerk = self.motion.jerk_abs_max(t_s);
+                self.push(HotRecord::Cycle(t_s, *cycle, jerk))
+            }
+            HotRecord::Distance(t_s, d) => {
+                self.motion.on_distance(t_s, d);
+                if self.options.robot_full_rate || self.distance_decimator.keep(t_s) {
+                    self.push(rec)?;
+                }
+                Ok(())
+            }
+            HotRecord::Event(..) => self.push(rec),
+        }
+    }
+
+    /// Takes every record a [`ControlLog`] queued so far (in order), as if its calls had been
+    /// made here. The cue thread calls it before each of its own log calls and at the end.
+    pub(crate) fn absorb(&mut self, from: &mut ControlLogReader) -> anyhow::Result<()> {
+        self.dropped_records += from.dropped.swap(0, std::sync::atomic::Ordering::Relaxed);
+        while let Ok(rec) = from.consumer.pop() {
+            self.ingest(rec)?;
+        }
+        Ok(())
+    }
+
     /// Logs a robot state (control rate; decimated to 100 Hz unless
     /// [`LogOptions::robot_full_rate`]; every state goes to the motion metrics). Copies into
     /// the ring: no allocation, no I/O (unless the ring is full).
     pub(crate) fn robot_state(&mut self, t_s: f64, state: &RobotState) -> anyhow::Result<()> {
-        self.motion.on_state(t_s, state);
-        if self.options.robot_full_rate || self.state_decimator.keep(t_s) {
-            self.push(HotRecord::State(t_s, *state))?;
-        }
-        Ok(())
+        self.ingest(HotRecord::State(t_s, *state))
     }
 
     /// Logs the command the controller asked for and the supervisor's verdict on it (control
@@ -585,17 +721,14 @@ impl TrialLog {
         cmd: &JointCommand,
         verdict: &Verdict,
     ) -> anyhow::Result<()> {
-        self.motion.on_verdict(t_s, verdict);
-        self.push(HotRecord::Command(t_s, *cmd, *verdict))
+        self.ingest(HotRecord::Command(t_s, *cmd, *verdict))
     }
 
     /// Logs what the control cycle at `t_s` [s] reports about itself (control rate; every
     /// cycle, `/robot/cycle`, after [`TrialLog::robot_state`] of the same cycle so the record
     /// carries its executed jerk). Copies into the ring.
     pub(crate) fn cycle(&mut self, t_s: f64, rec: &CycleRecord) -> anyhow::Result<()> {
-        self.motion.on_cycle(t_s, rec);
-        let jerk = self.motion.jerk_abs_max(t_s);
-        self.push(HotRecord::Cycle(t_s, *rec, jerk))
+        self.ingest(HotRecord::Cycle(t_s, *rec, None))
     }
 
     /// Logs the minimum distance between a tracked human point and the arm [m] (`None` when no
@@ -605,17 +738,13 @@ impl TrialLog {
         t_s: f64,
         min_distance_m: Option<f64>,
     ) -> anyhow::Result<()> {
-        self.motion.on_distance(t_s, min_distance_m);
-        if self.options.robot_full_rate || self.distance_decimator.keep(t_s) {
-            self.push(HotRecord::Distance(t_s, min_distance_m))?;
-        }
-        Ok(())
+        self.ingest(HotRecord::Distance(t_s, min_distance_m))
     }
 
     /// Logs a trial event (any rate; copies into the ring). `Safety` events go to
     /// `/safety/events`, the others to `/task/events`.
     pub(crate) fn event(&mut self, t_s: f64, event: &TrialEvent) -> anyhow::Result<()> {
-        self.push(HotRecord::Event(t_s, *event))
+        self.ingest(HotRecord::Event(t_s, *event))
     }
 
     /// Writes out what the control-rate calls queued in the ring (what every camera-rate call
@@ -647,6 +776,7 @@ impl TrialLog {
             mut robot,
             recorded,
             synchronous_drains,
+            dropped_records,
             motion,
             ..
         } = self;
@@ -679,6 +809,7 @@ impl TrialLog {
             plots,
             message_counts,
             synchronous_drains,
+            dropped_records,
             dir,
         })
     }

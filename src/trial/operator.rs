@@ -254,7 +254,7 @@ pub(crate) const COMMON: CommonParams = CommonParams {
 };
 
 /// What the operator sees of the robot, in the workspace frame.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub(crate) struct RobotView {
     /// Handover task phase.
     pub(crate) phase: Phase,

@@ -1,12 +1,26 @@
-//! The trial runtime: simulated operator (cues, 30 Hz) → `Assessor` → policy → `Controller`
-//! (500 Hz) → `Supervisor` → robot. With `--robot sim` (below) it runs on a **mock clock**; with
-//! an RTDE robot (`backend.rs`: the emulator or a UR5e) the same loop runs once per new
-//! controller timestamp, with the controller's time as trial time (not deterministic).
+//! The trial runtime: operator cues (30 Hz) → `Assessor` → policy → `Controller` (500 Hz) →
+//! `Supervisor` → robot, as two cycles:
+//! - the **control cycle** (`control.rs`, [`ControlCycle`]): read → controller → supervisor →
+//!   send → log ring, in [`control_loop`] with the time keeping, the link outage handling, the
+//!   handover scheduling and the stuck watch;
+//! - the **cue cycle** (`cue_cycle.rs`, [`CueCycle`]): an [`OperatorSource`] (simulated,
+//!   recorded or live) → assessor → policy.
 //!
-//! Time is the control cycle count × 2 ms; nothing in this path reads the wall clock, so a
-//! trial is deterministic for its seed and config and runs as fast as the CPU allows. The
-//! 500 Hz part (controller, supervisor, robot) allocates nothing per cycle; the 30 Hz part
-//! (operator, assessor, policy) and the logs run between control cycles on the same thread.
+//! They meet through a [`CueLink`], one of two:
+//! - **lockstep on the mock clock** (`--robot sim`, [`InlineCues`]): one thread; the cue frame
+//!   due at a cycle runs inside it. Time is the cycle count × 2 ms and nothing reads the wall
+//!   clock, so a trial is deterministic for its seed and config and runs as fast as the CPU
+//!   allows.
+//! - **threads in real time** (an RTDE robot, `backend.rs`: the emulator or a UR5e;
+//!   `threaded`): the control loop runs on a `control` thread paced by the robot's clock (one
+//!   cycle per controller sample, the controller's time as trial time; not deterministic), the
+//!   cue cycle and the trial log on the caller's thread. They exchange the robot snapshot and
+//!   the cue output through wait-free triple buffers, and the control cycle's log records
+//!   through a wait-free ring ([`ControlLog`]) that the cue thread absorbs. The control thread
+//!   neither waits for the cue thread nor allocates (`control_tests.rs`).
+//!
+//! After the loop, the one exit path: the control loop stops the robot through the supervisor,
+//! the operator source is finished, every log is finished with the reason.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -28,12 +42,12 @@ use safety::{Supervisor, SupervisorConfig, Verdict, Violation, WorldView};
 use super::backend::UrPorts;
 use super::config::TrialConfig;
 use super::control::{ControlCycle, CycleInput, CycleOutput};
-use super::cue_cycle::{CueCycle, OperatorSource};
+use super::cue_cycle::{CueCycle, CueOutput, OperatorSource};
 use super::cues::{CueSource, RecordedCues};
 use super::events::TrialEvent;
 #[cfg(feature = "vision")]
 use super::live::LiveCues;
-use super::log::{LogOptions, TrialLog, TrialMeta};
+use super::log::{ControlLog, ControlSink, LogOptions, TrialLog, TrialMeta};
 use super::operator::{Level, RobotView, SimulatedOperator};
 
 /// Control period [s] (UR5e).
@@ -318,7 +332,7 @@ impl std::error::Error for TrialEnded {
 }
 
 /// What the trial loop needs of its robot beyond [`Robot`].
-pub(crate) trait TrialRobot: Robot {
+pub(crate) trait TrialRobot: Robot + Send {
     /// Restarts the robot's control program without blocking (after a link loss its register
     /// watchdog may have stopped it); `false` when that is not possible now (not supported, or
     /// a restart is still under way). Called only while a resume is being waited for.
@@ -719,21 +733,218 @@ fn drive<R: TrialRobot>(
         })
         .collect();
 
-    let cue_rate = cfg.cue_rate_hz;
+    let plan = LoopPlan {
+        cfg,
+        clock,
+        n_handovers,
+        planned_start,
+        simulated,
+    };
+    // --- The loop, then the one exit path: every ending comes here. ---
+    // 1. The control loop ends by stopping the robot through the supervisor.
+    let LoopEnd {
+        mut reason,
+        detail,
+        mut failure,
+        t_end,
+    } = match clock {
+        Clock::Mock => {
+            let mut link = InlineCues {
+                cue: &mut cue,
+                cue_rate: cfg.cue_rate_hz,
+                next_cue: 0,
+                live: Live {
+                    handovers: n_handovers,
+                    dominant: "none",
+                    ..Live::default()
+                },
+                progress,
+            };
+            control_loop(&plan, &mut cc, &mut log, &mut link, stop)
+        }
+        Clock::Controller(_) => threaded::run(&plan, &mut cc, &mut log, &mut cue, stop, progress),
+    };
+    // 2. The operator source: a camera's thread (an error or a panic there ended the cues:
+    //    "cues_ended").
+    if let Err(e) = cue.finish()
+        && failure.is_none()
+    {
+        reason = reason::ERROR;
+        failure = Some(e.context("the live camera failed"));
+    }
+    // 3. Every log, with the reason.
+    let event = log.event(t_end, &TrialEvent::Finished { reason });
+    let finished = log.finish();
+    let dir = match event.and(finished) {
+        Ok(files) if files.dropped_records > 0 => {
+            // The control thread's log ring overflowed: the logs miss records (the motion
+            // metrics included), so the trial's figures cannot be trusted.
+            reason = reason::ERROR;
+            failure = Some(anyhow::anyhow!(
+                "{} control-rate log records were lost (the log ring was full); the logs in {} \
+                 are incomplete",
+                files.dropped_records,
+                files.dir.display()
+            ));
+            files.dir
+        }
+        Ok(files) => files.dir,
+        Err(e) => {
+            let e = e.context(format!(
+                "cannot finish the trial log in {}",
+                out_dir.display()
+            ));
+            failure = Some(match failure.take() {
+                Some(f) => f.context(format!("{e:#}")),
+                None => e,
+            });
+            reason = reason::ERROR;
+            out_dir.to_path_buf()
+        }
+    };
+    if exit_code(reason) == 0 && failure.is_none() {
+        return Ok(dir);
+    }
+    let error = failure.unwrap_or_else(|| {
+        anyhow::anyhow!(detail.unwrap_or_else(|| match reason {
+            reason::INTERRUPTED => "interrupted (Ctrl-C)".to_owned(),
+            r => r.to_owned(),
+        }))
+    });
+    Err(TrialEnded {
+        reason,
+        dir: Some(dir),
+        error,
+    }
+    .into())
+}
+
+/// What the control loop hands the exit path.
+struct LoopEnd {
+    reason: &'static str,
+    detail: Option<String>,
+    failure: Option<anyhow::Error>,
+    /// Trial time of the end [s].
+    t_end: f64,
+}
+
+/// What the control loop needs that stays fixed for the trial.
+struct LoopPlan<'a> {
+    cfg: &'a TrialConfig,
+    clock: Clock,
+    n_handovers: u32,
+    planned_start: Vec<f64>,
+    simulated: bool,
+}
+
+/// What the cue cycle sees of the robot, once per control cycle.
+#[derive(Debug, Clone, Copy, Default)]
+struct RobotSnapshot {
+    /// Trial time [s].
+    t_s: f64,
+    view: RobotView,
+    robot: RobotContext,
+    /// Handovers completed.
+    done: u32,
+}
+
+/// What a control cycle learns from the cue cycle.
+// Returned by value each cycle on the real-time path: boxing the output would allocate.
+#[allow(clippy::large_enum_variant)]
+enum CueExchange {
+    /// No new cue output since the last cycle.
+    Nothing,
+    /// A new cue output.
+    New(CueOutput),
+    /// The cues are over: `completed` (the work is done), `cues_ended`, or `error`.
+    Ended(&'static str),
+}
+
+/// How the control loop meets the cue cycle: inline on the same thread (the mock clock: the
+/// two cycles in lockstep, deterministic) or through single-slot handoffs with a cue thread of
+/// its own (real time; [`ThreadedCues`]).
+trait CueLink<L: ControlSink> {
+    /// Called every control cycle after the state is read.
+    fn exchange(&mut self, robot: &RobotSnapshot, log: &mut L) -> anyhow::Result<CueExchange>;
+    /// The controller confirmed a release at `t_s` [s].
+    fn released(&mut self, t_s: f64, log: &mut L) -> anyhow::Result<()>;
+    /// The robot link is down for `down_s` [s] (`None`: back), for the progress display.
+    fn link_down(&mut self, down_s: Option<f64>);
+}
+
+/// The cue cycle run inside the control cycle it falls in (the mock clock).
+struct InlineCues<'a> {
+    cue: &'a mut CueCycle,
+    cue_rate: f64,
+    next_cue: u64,
+    live: Live,
+    progress: &'a mut dyn FnMut(&Live),
+}
+
+impl CueLink<TrialLog> for InlineCues<'_> {
+    fn exchange(
+        &mut self,
+        robot: &RobotSnapshot,
+        log: &mut TrialLog,
+    ) -> anyhow::Result<CueExchange> {
+        // Frame n is due at cycle ceil(n / rate / 2 ms): integer test k·2ms·rate ≥ n.
+        if robot.t_s * self.cue_rate + 1e-9 < self.next_cue as f64 {
+            return Ok(CueExchange::Nothing);
+        }
+        let tc = self.next_cue as f64 / self.cue_rate;
+        self.next_cue += 1;
+        let Some(out) = self
+            .cue
+            .step(tc, &robot.view, robot.robot, robot.view.phase, log)?
+        else {
+            return Ok(CueExchange::Ended("cues_ended"));
+        };
+        self.live.t_s = tc;
+        self.live.hrc_cwl = out.hrc_cwl;
+        self.live.dominant = out.dominant;
+        self.live.handovers_done = robot.done;
+        (self.progress)(&self.live);
+        if self.cue.source.finished(robot.done, self.live.handovers) {
+            return Ok(CueExchange::Ended("completed"));
+        }
+        Ok(CueExchange::New(out))
+    }
+
+    fn released(&mut self, t_s: f64, log: &mut TrialLog) -> anyhow::Result<()> {
+        self.cue.source.released(t_s, log)
+    }
+
+    fn link_down(&mut self, down_s: Option<f64>) {
+        self.live.link_down_s = down_s;
+        if down_s.is_some() {
+            (self.progress)(&self.live);
+        }
+    }
+}
+
+/// The 500 Hz loop: read → (cue link) → handover scheduling → controller → supervisor → send
+/// → log, until the trial ends; then it stops the robot through the supervisor. Every `?` and
+/// panic inside the loop ends it here, never in the caller, so the exit path always runs.
+fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
+    plan: &LoopPlan<'_>,
+    cc: &mut ControlCycle<R>,
+    log: &mut L,
+    link: &mut C,
+    stop: &AtomicBool,
+) -> LoopEnd {
+    let cfg = plan.cfg;
+    let clock = plan.clock;
+    let n_handovers = plan.n_handovers;
+    let planned_start = &plan.planned_start;
+    let simulated = plan.simulated;
     let max_cycles = (cfg.max_duration_s / CYCLE_S).ceil() as u64;
     let mut motion = MotionAdaptation::default();
     let mut humans = HumanBody::default();
-    let mut next_cue: u64 = 0;
     let mut last_cue_t = 0.0;
     let mut started: u32 = 0; // handovers armed
     let mut done: u32 = 0; // handovers completed
     let mut prev_tcp_v = [0.0f64; 3];
     let mut peak_acc = 0.0f64;
-    let mut live = Live {
-        handovers: n_handovers,
-        dominant: "none",
-        ..Live::default()
-    };
     let mut reason = reason::MAX_DURATION;
 
     let mut k: u64 = 0;
@@ -825,8 +1036,7 @@ fn drive<R: TrialRobot>(
                                 }
                                 o.holds += 1;
                                 if o.holds % 25 == 1 {
-                                    live.link_down_s = Some(down_s);
-                                    progress(&live);
+                                    link.link_down(Some(down_s));
                                 }
                                 continue;
                             }
@@ -839,7 +1049,7 @@ fn drive<R: TrialRobot>(
                         // Back: trial time goes on from where it stopped, and the controller
                         // re-plans from the measured joints.
                         outage = None;
-                        live.link_down_s = None;
+                        link.link_down(None);
                         t0 = Some(cc.state.timestamp_s - (prev_t + CYCLE_S));
                         cc.controller.command_overridden();
                         log.event(prev_t + CYCLE_S, &TrialEvent::Link { up: true })?;
@@ -888,38 +1098,33 @@ fn drive<R: TrialRobot>(
             }
             prev_tcp_v = [v[0], v[1], v[2]];
 
-            // --- 30 Hz: operator → assessor → policy ---
-            // Frame n is due at cycle ceil(n / rate / 2 ms): integer test k·2ms·rate ≥ n.
-            if t * cue_rate + 1e-9 >= next_cue as f64 {
-                let tc = next_cue as f64 / cue_rate;
-                next_cue += 1;
-                let p = &cc.state.actual_tcp_pose;
-                let view = RobotView {
+            // --- the cue cycle: inline (mock clock) or through the handoffs (real time) ---
+            let p = &cc.state.actual_tcp_pose;
+            let snapshot = RobotSnapshot {
+                t_s: t,
+                view: RobotView {
                     phase: cc.controller.phase(),
                     tcp_m: cfg.frame.to_workspace([p[0], p[1], p[2]]),
                     tcp_speed_m_s: (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(),
                     tcp_peak_acc_m_s2: peak_acc,
-                };
-                peak_acc = 0.0;
-                let robot = RobotContext {
+                },
+                robot: RobotContext {
                     collaborating: cc.controller.collaborating(),
                     incomplete: cc.controller.incomplete(),
-                };
-                let Some(out) = cue.step(tc, &view, robot, cc.controller.phase(), &mut log)? else {
-                    reason = "cues_ended";
-                    break;
-                };
-                motion = out.motion;
-                humans = out.humans;
-                // A held recorded or camera frame is as old as its (mapped) time.
-                last_cue_t = out.cue_t_s;
-                live.t_s = tc;
-                live.hrc_cwl = out.hrc_cwl;
-                live.dominant = out.dominant;
-                live.handovers_done = done;
-                progress(&live);
-                if cue.source.finished(done, n_handovers) {
-                    reason = "completed";
+                },
+                done,
+            };
+            match link.exchange(&snapshot, log)? {
+                CueExchange::Nothing => {}
+                CueExchange::New(out) => {
+                    peak_acc = 0.0;
+                    motion = out.motion;
+                    humans = out.humans;
+                    // A held recorded or camera frame is as old as its (mapped) time.
+                    last_cue_t = out.cue_t_s;
+                }
+                CueExchange::Ended(why) => {
+                    reason = why;
                     break;
                 }
             }
@@ -959,9 +1164,9 @@ fn drive<R: TrialRobot>(
                 latency_s: timer.as_ref().map(CycleTimer::latency_s),
                 wake_jitter_s: timer.as_ref().and_then(|t| t.jitter_s),
             };
-            let CycleOutput { verdict, released } = cc.act(&input, &mut log)?;
+            let CycleOutput { verdict, released } = cc.act(&input, log)?;
             if released {
-                cue.source.released(t, &mut log)?;
+                link.released(t, log)?;
                 done += 1;
             }
             let intervention = match &verdict {
@@ -984,8 +1189,6 @@ fn drive<R: TrialRobot>(
         }
         Ok(())
     }));
-
-    // --- The one exit path: every ending comes here. ---
     let mut failure: Option<anyhow::Error> = match run {
         Ok(Ok(())) => None,
         Ok(Err(e)) => Some(e),
@@ -997,7 +1200,7 @@ fn drive<R: TrialRobot>(
     if failure.is_some() {
         reason = reason::ERROR;
     }
-    // 1. Stop the robot through the cc.supervisor.
+    // Stop the robot through the supervisor.
     let t_end = match clock {
         Clock::Mock => k as f64 * CYCLE_S,
         Clock::Controller(_) => t + CYCLE_S,
@@ -1016,47 +1219,258 @@ fn drive<R: TrialRobot>(
             None => e,
         });
     }
-    // 2. The operator source: a camera's thread (an error or a panic there ended the cues:
-    //    "cues_ended").
-    if let Err(e) = cue.finish()
-        && failure.is_none()
-    {
-        reason = reason::ERROR;
-        failure = Some(e.context("the live camera failed"));
-    }
-    // 3. Every log, with the reason.
-    let event = log.event(t_end, &TrialEvent::Finished { reason });
-    let finished = log.finish();
-    let dir = match event.and(finished) {
-        Ok(files) => files.dir,
-        Err(e) => {
-            let e = e.context(format!(
-                "cannot finish the trial log in {}",
-                out_dir.display()
-            ));
-            failure = Some(match failure.take() {
-                Some(f) => f.context(format!("{e:#}")),
-                None => e,
-            });
-            reason = reason::ERROR;
-            out_dir.to_path_buf()
-        }
-    };
-    if exit_code(reason) == 0 && failure.is_none() {
-        return Ok(dir);
-    }
-    let error = failure.unwrap_or_else(|| {
-        anyhow::anyhow!(detail.unwrap_or_else(|| match reason {
-            reason::INTERRUPTED => "interrupted (Ctrl-C)".to_owned(),
-            r => r.to_owned(),
-        }))
-    });
-    Err(TrialEnded {
+    LoopEnd {
         reason,
-        dir: Some(dir),
-        error,
+        detail,
+        failure,
+        t_end,
     }
-    .into())
+}
+
+/// The control loop on a thread of its own, the cue cycle on the caller's (real time).
+///
+/// - Control → cue: a [`RobotSnapshot`] each cycle (with the releases and the link state)
+///   through a triple buffer: wait-free, the newest value wins.
+/// - Cue → control: the newest [`CueOutput`] (and whether the cues are over), likewise.
+/// - Control → log: the control cycle's records through a [`ControlLog`] (a wait-free ring),
+///   absorbed into the trial log by the cue thread, which owns it.
+///
+/// The control thread never waits for the cue thread and allocates nothing per cycle; the cue
+/// thread polls every millisecond and runs the cue frames due at the robot's trial time, as the
+/// inline link does on the mock clock.
+mod threaded {
+    use super::*;
+
+    /// Control-rate records the ring holds [-]: 4 per cycle, ≈ 4 s of the control rate.
+    const CONTROL_LOG_RECORDS: usize = 8192;
+    /// How long the cue thread sleeps when nothing is due [ms].
+    const CUE_POLL_MS: u64 = 1;
+
+    #[derive(Debug, Clone, Copy, Default)]
+    pub(super) struct ToCue {
+        robot: RobotSnapshot,
+        /// Releases confirmed so far, and the time of the last [s].
+        released: u32,
+        last_release_t_s: f64,
+        link_down_s: Option<f64>,
+        /// The control loop has ended (the robot is stopped).
+        over: bool,
+    }
+
+    #[derive(Debug, Clone, Copy, Default)]
+    pub(super) struct FromCue {
+        /// Cue outputs published so far.
+        frames: u64,
+        out: Option<CueOutput>,
+        /// The cues are over, and why.
+        ended: Option<&'static str>,
+    }
+
+    /// The control loop's side of the handoffs.
+    pub(super) struct ThreadedCues {
+        to_cue: triple_buffer::Input<ToCue>,
+        from_cue: triple_buffer::Output<FromCue>,
+        mine: ToCue,
+        seen_frames: u64,
+    }
+
+    impl CueLink<ControlLog> for ThreadedCues {
+        fn exchange(
+            &mut self,
+            robot: &RobotSnapshot,
+            _log: &mut ControlLog,
+        ) -> anyhow::Result<CueExchange> {
+            self.mine.robot = *robot;
+            self.to_cue.write(self.mine);
+            let from = *self.from_cue.read();
+            if let Some(why) = from.ended {
+                return Ok(CueExchange::Ended(why));
+            }
+            if from.frames > self.seen_frames {
+                self.seen_frames = from.frames;
+                if let Some(out) = from.out {
+                    return Ok(CueExchange::New(out));
+                }
+            }
+            Ok(CueExchange::Nothing)
+        }
+
+        fn released(&mut self, t_s: f64, _log: &mut ControlLog) -> anyhow::Result<()> {
+            self.mine.released += 1;
+            self.mine.last_release_t_s = t_s;
+            self.to_cue.write(self.mine);
+            Ok(())
+        }
+
+        fn link_down(&mut self, down_s: Option<f64>) {
+            self.mine.link_down_s = down_s;
+            self.to_cue.write(self.mine);
+        }
+    }
+
+    /// The control loop's side of a fresh pair of handoffs, with the cue side's ends (tests).
+    #[cfg(test)]
+    pub(super) fn handoffs() -> (
+        ThreadedCues,
+        triple_buffer::Output<ToCue>,
+        triple_buffer::Input<FromCue>,
+    ) {
+        let (to_cue, to_cue_out) = triple_buffer::triple_buffer(&ToCue::default());
+        let (from_cue_in, from_cue) = triple_buffer::triple_buffer(&FromCue::default());
+        let link = ThreadedCues {
+            to_cue,
+            from_cue,
+            mine: ToCue::default(),
+            seen_frames: 0,
+        };
+        (link, to_cue_out, from_cue_in)
+    }
+
+    fn chain(first: Option<anyhow::Error>, then: anyhow::Error) -> anyhow::Error {
+        match first {
+            Some(f) => f.context(format!("{then:#}")),
+            None => then,
+        }
+    }
+
+    pub(super) fn run<R: TrialRobot + Send>(
+        plan: &LoopPlan<'_>,
+        cc: &mut ControlCycle<R>,
+        log: &mut TrialLog,
+        cue: &mut CueCycle,
+        stop: &AtomicBool,
+        progress: &mut dyn FnMut(&Live),
+    ) -> LoopEnd {
+        let (to_cue_in, mut to_cue_out) = triple_buffer::triple_buffer(&ToCue::default());
+        let (mut from_cue_in, from_cue_out) = triple_buffer::triple_buffer(&FromCue::default());
+        let (mut control_log, mut reader) = ControlLog::new(CONTROL_LOG_RECORDS);
+        let cue_rate = plan.cfg.cue_rate_hz;
+        std::thread::scope(|scope| {
+            let spawned = std::thread::Builder::new()
+                .name("control".into())
+                .spawn_scoped(scope, move || {
+                    let mut link = ThreadedCues {
+                        to_cue: to_cue_in,
+                        from_cue: from_cue_out,
+                        mine: ToCue::default(),
+                        seen_frames: 0,
+                    };
+                    let end = control_loop(plan, cc, &mut control_log, &mut link, stop);
+                    link.mine.over = true;
+                    link.to_cue.write(link.mine);
+                    end
+                });
+            let control = match spawned {
+                Ok(handle) => handle,
+                Err(e) => {
+                    return LoopEnd {
+                        reason: reason::ERROR,
+                        detail: None,
+                        failure: Some(anyhow::anyhow!("cannot start the control thread: {e}")),
+                        t_end: 0.0,
+                    };
+                }
+            };
+            let mut live = Live {
+                handovers: plan.n_handovers,
+                dominant: "none",
+                ..Live::default()
+            };
+            let cued =
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> anyhow::Result<()> {
+                    let (mut next_cue, mut frames, mut handled) = (0u64, 0u64, 0u32);
+                    let mut ended = false;
+                    loop {
+                        log.absorb(&mut reader)?;
+                        let to = *to_cue_out.read();
+                        if to.over {
+                            return Ok(());
+                        }
+                        while handled < to.released {
+                            cue.source.released(to.last_release_t_s, log)?;
+                            handled += 1;
+                        }
+                        if to.link_down_s != live.link_down_s {
+                            live.link_down_s = to.link_down_s;
+                            progress(&live);
+                        }
+                        let due = to.robot.t_s * cue_rate + 1e-9 >= next_cue as f64;
+                        if ended || !due {
+                            std::thread::sleep(Duration::from_millis(CUE_POLL_MS));
+                            continue;
+                        }
+                        let tc = next_cue as f64 / cue_rate;
+                        next_cue += 1;
+                        let robot = &to.robot;
+                        match cue.step(tc, &robot.view, robot.robot, robot.view.phase, log)? {
+                            None => {
+                                ended = true;
+                                from_cue_in.write(FromCue {
+                                    frames,
+                                    out: None,
+                                    ended: Some("cues_ended"),
+                                });
+                            }
+                            Some(out) => {
+                                frames += 1;
+                                let finished = cue.source.finished(robot.done, plan.n_handovers);
+                                ended = finished;
+                                from_cue_in.write(FromCue {
+                                    frames,
+                                    out: Some(out),
+                                    ended: finished.then_some("completed"),
+                                });
+                                live.t_s = tc;
+                                live.hrc_cwl = out.hrc_cwl;
+                                live.dominant = out.dominant;
+                                live.handovers_done = robot.done;
+                                progress(&live);
+                            }
+                        }
+                    }
+                }));
+            let cue_failure = match cued {
+                Ok(Ok(())) => None,
+                Ok(Err(e)) => Some(e.context("the cue cycle failed")),
+                Err(p) => Some(anyhow::anyhow!(
+                    "the cue cycle panicked: {}",
+                    panic_message(p.as_ref())
+                )),
+            };
+            if cue_failure.is_some() {
+                // End the control loop (it stops the robot), keeping its log flowing meanwhile.
+                from_cue_in.write(FromCue {
+                    ended: Some(reason::ERROR),
+                    ..FromCue::default()
+                });
+                while !to_cue_out.read().over && !control.is_finished() {
+                    let _ = log.absorb(&mut reader);
+                    std::thread::sleep(Duration::from_millis(CUE_POLL_MS));
+                }
+            }
+            let mut end = match control.join() {
+                Ok(end) => end,
+                Err(p) => LoopEnd {
+                    reason: reason::ERROR,
+                    detail: None,
+                    failure: Some(anyhow::anyhow!(
+                        "the control thread panicked: {}",
+                        panic_message(p.as_ref())
+                    )),
+                    t_end: 0.0,
+                },
+            };
+            if let Err(e) = log.absorb(&mut reader) {
+                end.reason = reason::ERROR;
+                end.failure = Some(chain(end.failure.take(), e));
+            }
+            if let Some(e) = cue_failure {
+                end.reason = reason::ERROR;
+                end.failure = Some(chain(end.failure.take(), e));
+            }
+            end
+        })
+    }
 }
 
 /// The planner's [`SafetyEnvelope`]: the supervisor's joint, TCP, collaboration and
