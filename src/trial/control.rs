@@ -51,8 +51,10 @@ pub(crate) struct CycleInput<'a> {
     pub(crate) simulated: bool,
     /// Control cycles skipped before this one (0 on the mock clock).
     pub(crate) missed: u32,
-    /// Cycle latency and wake jitter [s] (real time only).
-    pub(crate) latency_s: Option<f64>,
+    /// When this cycle's state was read (real time only): the cycle record's latency is the
+    /// wall time from it to the send.
+    pub(crate) read_at: Option<std::time::Instant>,
+    /// Wake jitter [s] (real time only).
     pub(crate) wake_jitter_s: Option<f64>,
 }
 
@@ -196,11 +198,13 @@ impl<R: TrialRobot> ControlCycle<R> {
             log.robot_state(t, &self.state)?;
         }
         log.command(t, &self.cmd, &verdict)?;
+        // Read → send: the supervisor's step above sent the command.
+        let latency_s = input.read_at.map(|at| at.elapsed().as_secs_f64());
         log.cycle(
             t,
             &CycleRecord {
                 missed: input.missed,
-                latency_s: input.latency_s,
+                latency_s,
                 wake_jitter_s: input.wake_jitter_s,
                 jerk_limit_rad_s3: self.controller.jerk_limit_rad_s3(),
                 time_scale: self.controller.scale_report().scale,

@@ -112,7 +112,7 @@ fn run_handovers<R: TrialRobot>(
                 done: 0,
                 simulated: false,
                 missed: 0,
-                latency_s: None,
+                read_at: (!mock).then(std::time::Instant::now),
                 wake_jitter_s: None,
             };
             if mock {

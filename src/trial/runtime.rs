@@ -241,11 +241,6 @@ impl CycleTimer {
         }
         self.last_fresh = Some((self.arrival, ts));
     }
-
-    /// Wall time since the arrival [s].
-    fn latency_s(&self) -> f64 {
-        self.arrival.elapsed().as_secs_f64()
-    }
 }
 
 /// Why a trial ended: `summary.json`'s `finish_reason`, the `Finished` event's reason. The
@@ -1161,7 +1156,7 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
                     Clock::Mock => 0,
                     Clock::Controller(_) => ((dt / CYCLE_S).round() as u32).saturating_sub(1),
                 },
-                latency_s: timer.as_ref().map(CycleTimer::latency_s),
+                read_at: timer.as_ref().map(|t| t.arrival),
                 wake_jitter_s: timer.as_ref().and_then(|t| t.jitter_s),
             };
             let CycleOutput { verdict, released } = cc.act(&input, log)?;
