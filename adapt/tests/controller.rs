@@ -850,3 +850,78 @@ fn config_rules() {
         "{err}"
     );
 }
+
+#[test]
+fn after_a_reduction_it_continues_from_the_sent_command_not_a_step_back() {
+    // A supervisor reduction while moving (here: half the step, as SAF-REQ-004 or -005 would
+    // send it). The robot's reported target lags the servo command by the servo's smoothing
+    // (about v·lookahead); re-planning from it commanded a step back of that lag — 0.0185 rad
+    // in one cycle on the emulator, which the supervisor then stopped (SAF-REQ-004). The next
+    // command must continue from what was sent, within one ordinary step.
+    let mut run = Run::new(
+        ControllerConfig::example(),
+        HandScript::ReachWhenPresented,
+        Start::Home,
+    );
+    run.ctl.start_handover();
+    run.run_until(1.0, |r| r.samples.len() == 300);
+    assert!(run.state.actual_qd.iter().any(|v| v.abs() > 0.3), "moving");
+    let Some(prev) = run.prev_servo[1] else {
+        panic!("servoing")
+    };
+    // One cycle by hand: the controller's command, sent with its step halved.
+    run.robot.read_state(&mut run.state).unwrap();
+    let view = run.view();
+    let now = run.state.timestamp_s;
+    run.ctl
+        .step(now, &run.state, &run.adaptation, &view, &mut run.cmd);
+    let JointCommand::Servo {
+        q: asked,
+        lookahead_s,
+        gain,
+    } = run.cmd
+    else {
+        panic!("a servo command")
+    };
+    let step: Joints = std::array::from_fn(|k| asked[k] - prev[k]);
+    let normal = step.iter().fold(0.0f64, |m, d| m.max(d.abs()));
+    let sent: Joints = std::array::from_fn(|k| prev[k] + 0.5 * step[k]);
+    run.robot
+        .send(&JointCommand::Servo {
+            q: sent,
+            lookahead_s,
+            gain,
+        })
+        .unwrap();
+    run.ctl.command_reduced(0.5);
+    run.prev_servo = [Some(prev), Some(sent)];
+    // The next command: within an ordinary step of what was sent, and onwards, not back.
+    run.cycle();
+    let JointCommand::Servo { q: next, .. } = run.cmd else {
+        panic!("a servo command after the reduction: {:?}", run.cmd)
+    };
+    let lag: f64 = (0..6)
+        .map(|k| (run.state.target_q[k] - sent[k]).abs())
+        .fold(0.0, f64::max);
+    assert!(
+        lag > 5.0 * normal,
+        "the robot's target lags the command: {lag} vs step {normal}"
+    );
+    for k in 0..6 {
+        let d = next[k] - sent[k];
+        assert!(
+            d.abs() <= 1.5 * normal,
+            "joint {k}: {d} rad after the reduction, an ordinary step is {normal}"
+        );
+        if step[k].abs() > 0.2 * normal {
+            assert!(
+                d * step[k] > 0.0,
+                "joint {k} turned back: {d} after {}",
+                step[k]
+            );
+        }
+    }
+    // And the fetch completes within the limits.
+    run.run_until(6.0, |r| r.ctl.phase() == Phase::Approach);
+    assert!(run.max_servo_acc <= PI, "{}", run.max_servo_acc);
+}

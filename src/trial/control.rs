@@ -173,7 +173,7 @@ impl<R: TrialRobot> ControlCycle<R> {
                 // Slowed for a cap (< 1) or, for a too-hard deceleration, slowed at the
                 // acceleration limit (> 1): either way not the planned motion.
                 if (*scale - 1.0).abs() > 1e-6 {
-                    self.controller.command_reduced();
+                    self.controller.command_reduced(*scale);
                 }
             }
             Verdict::Stopped { .. } | Verdict::Halted { .. } => {

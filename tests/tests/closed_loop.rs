@@ -241,7 +241,7 @@ impl Loop {
             Verdict::Passed => {}
             Verdict::Reduced { scale, .. } => {
                 if (scale - 1.0).abs() > 1e-6 {
-                    self.ctl.command_reduced();
+                    self.ctl.command_reduced(scale);
                 }
             }
             Verdict::Stopped { .. } | Verdict::Halted { .. } => self.ctl.command_overridden(),
