@@ -222,3 +222,74 @@ fn the_counter_sees_allocations_in_this_binary() {
     std::hint::black_box(v);
     assert_eq!(n, 1);
 }
+
+/// A cue link whose cues never come: nothing for 1 s of trial time, then the end.
+struct SilentCues;
+
+impl CueLink<TrialLog> for SilentCues {
+    fn exchange(
+        &mut self,
+        robot: &RobotSnapshot,
+        _log: &mut TrialLog,
+    ) -> anyhow::Result<CueExchange> {
+        Ok(if robot.t_s >= 1.0 {
+            CueExchange::Ended("completed")
+        } else {
+            CueExchange::Nothing
+        })
+    }
+    fn released(&mut self, _t_s: f64, _log: &mut TrialLog) -> anyhow::Result<()> {
+        Ok(())
+    }
+    fn link_down(&mut self, _down_s: Option<f64>) {}
+}
+
+#[test]
+fn nothing_moves_before_the_first_cue_output() {
+    // On a control thread the first cue output arrives a few milliseconds in; until then the
+    // operator is unknown, not absent, so no handover may start — even one planned for t = 0.
+    let spec = test_spec(Level::L1, 1, 60.0);
+    let out = tempfile::tempdir().unwrap();
+    let setup = load_setup(&spec, &RobotChoice::Sim, &CueSource::Simulated, out.path()).unwrap();
+    let home = setup.ctl_cfg.task.home_q_rad;
+    let sim = SimRobot::new(SimConfig {
+        initial_q_rad: home,
+        ..SimConfig::ur5e()
+    })
+    .unwrap();
+    let sup_cfg = SupervisorConfig::ur5e();
+    let mut ctl_cfg = setup.ctl_cfg;
+    ctl_cfg.envelope = planner_envelope(&sup_cfg).unwrap();
+    let mut cc = ControlCycle::new(
+        Supervisor::new(LockstepSim { sim, first: true }, sup_cfg).unwrap(),
+        Controller::new(ctl_cfg).unwrap(),
+    );
+    let meta = TrialMeta {
+        participant: "silent".into(),
+        condition: "L1".into(),
+        policy: "fixed".into(),
+        seed: 0,
+        simulated: true,
+        cue_source: None,
+        started_utc: "2026-12-01T00:00:00Z".into(),
+        robot: "test".into(),
+    };
+    let mut log = TrialLog::create(out.path(), &meta, LogOptions::default()).unwrap();
+    let plan = LoopPlan {
+        cfg: &spec.config,
+        clock: Clock::Mock,
+        n_handovers: 3,
+        planned_start: vec![0.0, 0.0, 0.0],
+        simulated: true,
+    };
+    let stop = AtomicBool::new(false);
+    let end = control_loop(&plan, &mut cc, &mut log, &mut SilentCues, &stop);
+    assert!(end.failure.is_none(), "{:?}", end.failure);
+    assert_eq!(end.reason, "completed");
+    assert_eq!(cc.controller.phase(), Phase::Idle, "no handover armed");
+    let moved = (0..6)
+        .map(|k| (cc.state.actual_q[k] - home[k]).abs())
+        .fold(0.0, f64::max);
+    assert!(moved < 1e-9, "the arm moved {moved} rad");
+    log.finish().unwrap();
+}

@@ -936,6 +936,8 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
     let mut motion = MotionAdaptation::default();
     let mut humans = HumanBody::default();
     let mut last_cue_t = 0.0;
+    // Whether a cue output has arrived yet (handovers are armed only after it).
+    let mut cue_seen = false;
     let mut started: u32 = 0; // handovers armed
     let mut done: u32 = 0; // handovers completed
     let mut prev_tcp_v = [0.0f64; 3];
@@ -1112,6 +1114,7 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
             match link.exchange(&snapshot, log)? {
                 CueExchange::Nothing => {}
                 CueExchange::New(out) => {
+                    cue_seen = true;
                     peak_acc = 0.0;
                     motion = out.motion;
                     humans = out.humans;
@@ -1125,8 +1128,12 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
             }
 
             // --- handover scheduling ---
+            // Nothing moves before the first cue output: until then the operator is unknown,
+            // not absent (on the mock clock it arrives in the first cycle; on a control thread
+            // a few milliseconds in).
             let phase = cc.controller.phase();
             if (phase == Phase::Idle || phase == Phase::Done)
+                && cue_seen
                 && started == done
                 && started < n_handovers
                 && t >= planned_start[started as usize]
@@ -1378,7 +1385,9 @@ mod threaded {
                     loop {
                         log.absorb(&mut reader)?;
                         let to = *to_cue_out.read();
-                        if to.over {
+                        // Over, or the control thread is gone without saying so (a panic
+                        // outside its own catch): never wait for it.
+                        if to.over || control.is_finished() {
                             return Ok(());
                         }
                         while handled < to.released {
