@@ -12,7 +12,7 @@ use hrc_adapt_tests::alloc_count::allocations_in;
 use robot_io::geometry::{HumanBody, Torso};
 
 use super::*;
-use crate::trial::control::{ControlCycle, CycleInput};
+use crate::trial::control::CycleInput;
 
 /// What a run of cycles did: (allocations, cycles, phases entered, peak TCP speed [m/s]).
 struct Run {
@@ -38,6 +38,21 @@ fn operator() -> HumanBody {
     }
 }
 
+/// A trial log in `dir` for a test run named `participant` (simulated data).
+fn test_log(dir: &Path, participant: &str) -> TrialLog {
+    let meta = TrialMeta {
+        participant: participant.into(),
+        condition: "L1".into(),
+        policy: "fixed".into(),
+        seed: 0,
+        simulated: true,
+        cue_source: None,
+        started_utc: "2026-12-01T00:00:00Z".into(),
+        robot: "test".into(),
+    };
+    TrialLog::create(dir, &meta, LogOptions::default()).unwrap()
+}
+
 /// Runs `cycles` control cycles of handovers on `robot`; `mock` takes trial time from the cycle
 /// count and logs straight into the trial log (the simulated robot: the lockstep path);
 /// otherwise time is the robot's clock, each cycle also exchanges with the cue handoffs, and it
@@ -50,24 +65,8 @@ fn run_handovers<R: TrialRobot>(
     cycles: u64,
     mock: bool,
 ) -> Run {
-    let sup_cfg = SupervisorConfig::ur5e();
-    let mut ctl_cfg = setup.ctl_cfg;
-    ctl_cfg.envelope = planner_envelope(&sup_cfg).unwrap();
-    let mut cc = ControlCycle::new(
-        Supervisor::new(robot, sup_cfg).unwrap(),
-        Controller::new(ctl_cfg).unwrap(),
-    );
-    let meta = TrialMeta {
-        participant: "alloc".into(),
-        condition: "L1".into(),
-        policy: "fixed".into(),
-        seed: 0,
-        simulated: true,
-        cue_source: None,
-        started_utc: "2026-12-01T00:00:00Z".into(),
-        robot: "test".into(),
-    };
-    let mut log = TrialLog::create(out, &meta, LogOptions::default()).unwrap();
+    let mut cc = control_cycle(robot, setup.ctl_cfg).unwrap();
+    let mut log = test_log(out, "alloc");
     let (mut control_log, mut reader) = ControlLog::new(8192);
     // The control thread's end of the cue handoffs (the cue side is not run here).
     let (mut link, _to_cue, _from_cue) = threaded::handoffs();
@@ -257,24 +256,8 @@ fn nothing_moves_before_the_first_cue_output() {
         ..SimConfig::ur5e()
     })
     .unwrap();
-    let sup_cfg = SupervisorConfig::ur5e();
-    let mut ctl_cfg = setup.ctl_cfg;
-    ctl_cfg.envelope = planner_envelope(&sup_cfg).unwrap();
-    let mut cc = ControlCycle::new(
-        Supervisor::new(LockstepSim { sim, first: true }, sup_cfg).unwrap(),
-        Controller::new(ctl_cfg).unwrap(),
-    );
-    let meta = TrialMeta {
-        participant: "silent".into(),
-        condition: "L1".into(),
-        policy: "fixed".into(),
-        seed: 0,
-        simulated: true,
-        cue_source: None,
-        started_utc: "2026-12-01T00:00:00Z".into(),
-        robot: "test".into(),
-    };
-    let mut log = TrialLog::create(out.path(), &meta, LogOptions::default()).unwrap();
+    let mut cc = control_cycle(LockstepSim { sim, first: true }, setup.ctl_cfg).unwrap();
+    let mut log = test_log(out.path(), "silent");
     let plan = LoopPlan {
         cfg: &spec.config,
         clock: Clock::Mock,

@@ -338,6 +338,15 @@ pub(crate) trait TrialRobot: Robot + Send {
 
 impl TrialRobot for LockstepSim {}
 
+/// `first` with `then` added to its context, or `then` alone: the error of an ending that
+/// went wrong more than once.
+fn chain(first: Option<anyhow::Error>, then: anyhow::Error) -> anyhow::Error {
+    match first {
+        Some(f) => f.context(format!("{then:#}")),
+        None => then,
+    }
+}
+
 /// The panic message of a caught panic.
 fn panic_message(p: &(dyn std::any::Any + Send)) -> &str {
     p.downcast_ref::<&str>()
@@ -684,15 +693,7 @@ fn drive<R: TrialRobot>(
         workspace.clone(),
         cfg.frame,
     );
-    let supervisor_cfg = SupervisorConfig::ur5e();
-    let mut ctl_cfg = ctl_cfg;
-    // The planner stays inside the supervisor's own limits (the same numbers, checked
-    // independently by each).
-    ctl_cfg.envelope = planner_envelope(&supervisor_cfg)?;
-    let mut cc = ControlCycle::new(
-        Supervisor::new(robot, supervisor_cfg)?,
-        Controller::new(ctl_cfg)?,
-    );
+    let mut cc = control_cycle(robot, ctl_cfg)?;
     let meta = TrialMeta {
         participant: spec.participant.clone(),
         condition: spec.condition.as_str().to_owned(),
@@ -746,13 +747,7 @@ fn drive<R: TrialRobot>(
         Clock::Mock => {
             let mut link = InlineCues {
                 cue: &mut cue,
-                cue_rate: cfg.cue_rate_hz,
-                next_cue: 0,
-                live: Live {
-                    handovers: n_handovers,
-                    dominant: "none",
-                    ..Live::default()
-                },
+                runner: CueRunner::new(cfg.cue_rate_hz, n_handovers),
                 progress,
             };
             control_loop(&plan, &mut cc, &mut log, &mut link, stop)
@@ -789,10 +784,7 @@ fn drive<R: TrialRobot>(
                 "cannot finish the trial log in {}",
                 out_dir.display()
             ));
-            failure = Some(match failure.take() {
-                Some(f) => f.context(format!("{e:#}")),
-                None => e,
-            });
+            failure = Some(chain(failure.take(), e));
             reason = reason::ERROR;
             out_dir.to_path_buf()
         }
@@ -867,12 +859,72 @@ trait CueLink<L: ControlSink> {
     fn link_down(&mut self, down_s: Option<f64>);
 }
 
+/// What both cue links share: the cue frames' schedule (frame n at trial time n / rate) and
+/// the progress display.
+struct CueRunner {
+    /// Cue rate [frames/s].
+    rate: f64,
+    /// The next frame's number.
+    next: u64,
+    live: Live,
+}
+
+impl CueRunner {
+    fn new(rate: f64, handovers: u32) -> Self {
+        Self {
+            rate,
+            next: 0,
+            live: Live {
+                handovers,
+                dominant: "none",
+                ..Live::default()
+            },
+        }
+    }
+
+    /// Runs the cue frame due at the snapshot's trial time, if one is (one per call), and
+    /// shows it: `Nothing` (none due), `New`, or `Ended` (`cues_ended`: the source ended;
+    /// `completed`: the work is done).
+    fn run_due(
+        &mut self,
+        cue: &mut CueCycle,
+        robot: &RobotSnapshot,
+        log: &mut TrialLog,
+        progress: &mut dyn FnMut(&Live),
+    ) -> anyhow::Result<CueExchange> {
+        // Frame n is due at cycle ceil(n / rate / 2 ms): integer test k·2ms·rate ≥ n.
+        if robot.t_s * self.rate + 1e-9 < self.next as f64 {
+            return Ok(CueExchange::Nothing);
+        }
+        let tc = self.next as f64 / self.rate;
+        self.next += 1;
+        let Some(out) = cue.step(tc, &robot.view, robot.robot, robot.view.phase, log)? else {
+            return Ok(CueExchange::Ended(reason::CUES_ENDED));
+        };
+        self.live.t_s = tc;
+        self.live.hrc_cwl = out.hrc_cwl;
+        self.live.dominant = out.dominant;
+        self.live.handovers_done = robot.done;
+        progress(&self.live);
+        if cue.source.finished(robot.done, self.live.handovers) {
+            return Ok(CueExchange::Ended(reason::COMPLETED));
+        }
+        Ok(CueExchange::New(out))
+    }
+
+    /// Shows the link state when it changes (`None`: up).
+    fn link_down(&mut self, down_s: Option<f64>, progress: &mut dyn FnMut(&Live)) {
+        if down_s != self.live.link_down_s {
+            self.live.link_down_s = down_s;
+            progress(&self.live);
+        }
+    }
+}
+
 /// The cue cycle run inside the control cycle it falls in (the mock clock).
 struct InlineCues<'a> {
     cue: &'a mut CueCycle,
-    cue_rate: f64,
-    next_cue: u64,
-    live: Live,
+    runner: CueRunner,
     progress: &'a mut dyn FnMut(&Live),
 }
 
@@ -882,27 +934,7 @@ impl CueLink<TrialLog> for InlineCues<'_> {
         robot: &RobotSnapshot,
         log: &mut TrialLog,
     ) -> anyhow::Result<CueExchange> {
-        // Frame n is due at cycle ceil(n / rate / 2 ms): integer test k·2ms·rate ≥ n.
-        if robot.t_s * self.cue_rate + 1e-9 < self.next_cue as f64 {
-            return Ok(CueExchange::Nothing);
-        }
-        let tc = self.next_cue as f64 / self.cue_rate;
-        self.next_cue += 1;
-        let Some(out) = self
-            .cue
-            .step(tc, &robot.view, robot.robot, robot.view.phase, log)?
-        else {
-            return Ok(CueExchange::Ended("cues_ended"));
-        };
-        self.live.t_s = tc;
-        self.live.hrc_cwl = out.hrc_cwl;
-        self.live.dominant = out.dominant;
-        self.live.handovers_done = robot.done;
-        (self.progress)(&self.live);
-        if self.cue.source.finished(robot.done, self.live.handovers) {
-            return Ok(CueExchange::Ended("completed"));
-        }
-        Ok(CueExchange::New(out))
+        self.runner.run_due(self.cue, robot, log, self.progress)
     }
 
     fn released(&mut self, t_s: f64, log: &mut TrialLog) -> anyhow::Result<()> {
@@ -910,10 +942,7 @@ impl CueLink<TrialLog> for InlineCues<'_> {
     }
 
     fn link_down(&mut self, down_s: Option<f64>) {
-        self.live.link_down_s = down_s;
-        if down_s.is_some() {
-            (self.progress)(&self.live);
-        }
+        self.runner.link_down(down_s, self.progress);
     }
 }
 
@@ -1216,10 +1245,7 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
             panic_message(p.as_ref())
         );
         reason = reason::ERROR;
-        failure = Some(match failure.take() {
-            Some(f) => f.context(format!("{e:#}")),
-            None => e,
-        });
+        failure = Some(chain(failure.take(), e));
     }
     LoopEnd {
         reason,
@@ -1328,13 +1354,6 @@ mod threaded {
         (link, to_cue_out, from_cue_in)
     }
 
-    fn chain(first: Option<anyhow::Error>, then: anyhow::Error) -> anyhow::Error {
-        match first {
-            Some(f) => f.context(format!("{then:#}")),
-            None => then,
-        }
-    }
-
     pub(super) fn run<R: TrialRobot + Send>(
         plan: &LoopPlan<'_>,
         cc: &mut ControlCycle<R>,
@@ -1346,7 +1365,6 @@ mod threaded {
         let (to_cue_in, mut to_cue_out) = triple_buffer::triple_buffer(&ToCue::default());
         let (mut from_cue_in, from_cue_out) = triple_buffer::triple_buffer(&FromCue::default());
         let (mut control_log, mut reader) = ControlLog::new(CONTROL_LOG_RECORDS);
-        let cue_rate = plan.cfg.cue_rate_hz;
         std::thread::scope(|scope| {
             let spawned = std::thread::Builder::new()
                 .name("control".into())
@@ -1373,14 +1391,10 @@ mod threaded {
                     };
                 }
             };
-            let mut live = Live {
-                handovers: plan.n_handovers,
-                dominant: "none",
-                ..Live::default()
-            };
+            let mut runner = CueRunner::new(plan.cfg.cue_rate_hz, plan.n_handovers);
             let cued =
                 std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> anyhow::Result<()> {
-                    let (mut next_cue, mut frames, mut handled) = (0u64, 0u64, 0u32);
+                    let (mut frames, mut handled) = (0u64, 0u32);
                     let mut ended = false;
                     loop {
                         log.absorb(&mut reader)?;
@@ -1394,41 +1408,31 @@ mod threaded {
                             cue.source.released(to.last_release_t_s, log)?;
                             handled += 1;
                         }
-                        if to.link_down_s != live.link_down_s {
-                            live.link_down_s = to.link_down_s;
-                            progress(&live);
-                        }
-                        let due = to.robot.t_s * cue_rate + 1e-9 >= next_cue as f64;
-                        if ended || !due {
-                            std::thread::sleep(Duration::from_millis(CUE_POLL_MS));
-                            continue;
-                        }
-                        let tc = next_cue as f64 / cue_rate;
-                        next_cue += 1;
-                        let robot = &to.robot;
-                        match cue.step(tc, &robot.view, robot.robot, robot.view.phase, log)? {
-                            None => {
+                        runner.link_down(to.link_down_s, progress);
+                        let step = if ended {
+                            CueExchange::Nothing
+                        } else {
+                            runner.run_due(cue, &to.robot, log, progress)?
+                        };
+                        match step {
+                            CueExchange::Nothing => {
+                                std::thread::sleep(Duration::from_millis(CUE_POLL_MS));
+                            }
+                            CueExchange::Ended(why) => {
                                 ended = true;
                                 from_cue_in.write(FromCue {
                                     frames,
                                     out: None,
-                                    ended: Some("cues_ended"),
+                                    ended: Some(why),
                                 });
                             }
-                            Some(out) => {
+                            CueExchange::New(out) => {
                                 frames += 1;
-                                let finished = cue.source.finished(robot.done, plan.n_handovers);
-                                ended = finished;
                                 from_cue_in.write(FromCue {
                                     frames,
                                     out: Some(out),
-                                    ended: finished.then_some("completed"),
+                                    ended: None,
                                 });
-                                live.t_s = tc;
-                                live.hrc_cwl = out.hrc_cwl;
-                                live.dominant = out.dominant;
-                                live.handovers_done = robot.done;
-                                progress(&live);
                             }
                         }
                     }
@@ -1475,6 +1479,21 @@ mod threaded {
             end
         })
     }
+}
+
+/// The trial's control cycle on `robot`: the UR5e supervisor, and the controller of `ctl_cfg`
+/// planning inside the supervisor's own limits (the same numbers, checked independently by
+/// each).
+fn control_cycle<R: TrialRobot>(
+    robot: R,
+    mut ctl_cfg: ControllerConfig,
+) -> anyhow::Result<ControlCycle<R>> {
+    let supervisor_cfg = SupervisorConfig::ur5e();
+    ctl_cfg.envelope = planner_envelope(&supervisor_cfg)?;
+    Ok(ControlCycle::new(
+        Supervisor::new(robot, supervisor_cfg)?,
+        Controller::new(ctl_cfg)?,
+    ))
 }
 
 /// The planner's [`SafetyEnvelope`]: the supervisor's joint, TCP, collaboration and
