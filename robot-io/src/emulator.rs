@@ -258,6 +258,8 @@ const SIM_FIELDS: [(&str, FieldType); 15] = [
 
 /// Handle of the constant-zero output registers a SimBackend serves (our program writes none).
 const SIM_ZERO_BASE: usize = 1000;
+/// Handles of `output_int_register_0..=47`: this base + the register number.
+const SIM_OUTPUT_INT_BASE: usize = 2000;
 
 /// Backend executing our register protocol on a [`SimRobot`].
 ///
@@ -266,9 +268,9 @@ const SIM_ZERO_BASE: usize = 1000;
 /// registers are decoded like the program does and a new command (new sequence number) is
 /// sent to the SimRobot. While a servo command is in force, every cycle (each of the
 /// `speedup` cycles of a burst too) sends the SimRobot its extrapolated target,
-/// [`ServoFeedforward::target`] n cycles after the command arrived, as the URScript program
-/// does (see [`crate::script`]; the emulator runs the program with servoj time t = one
-/// cycle). The watchdog is armed at the first write of the command register
+/// [`ServoFeedforward::target`] at the program's tick, as the URScript program does (see
+/// [`crate::script`]; the emulator runs one program iteration per cycle, servoj time t = one
+/// cycle, and serves the tick as `output_int_register_<int_base>`). The watchdog is armed at the first write of the command register
 /// after the program starts: when no write arrives for `1 / watchdog_hz` seconds of virtual
 /// time, the program is stopped (the arm brakes to rest, `runtime_state` goes STOPPED).
 #[derive(Debug)]
@@ -278,6 +280,8 @@ pub struct SimBackend {
     program: Option<RegisterMap>,
     program_start_cycle: u64,
     last_seq: Option<i32>,
+    /// The program's loop iterations (its tick), counted from 1 at its first cycle.
+    tick: i32,
     /// The servo command in force, for the per-cycle extrapolation.
     servo: Option<ServoInForce>,
     watchdog_trips: u64,
@@ -293,8 +297,6 @@ struct ServoInForce {
     lookahead_s: f64,
     gain: f64,
     feedforward: ServoFeedforward,
-    /// Cycles since its sequence number arrived.
-    since_cycles: u64,
     /// The target last sent to the SimRobot [rad].
     sent: Option<Joints>,
 }
@@ -314,6 +316,7 @@ impl SimBackend {
             program: None,
             program_start_cycle: 0,
             last_seq: None,
+            tick: 0,
             servo: None,
             watchdog_trips: 0,
             commands_executed: 0,
@@ -353,6 +356,7 @@ impl SimBackend {
 
     fn run_program(&mut self, inputs: &InputRegisters) {
         let Some(map) = self.program else { return };
+        self.tick = self.tick.wrapping_add(1);
         let ib = usize::from(map.int_base);
         let db = usize::from(map.double_base);
         let written = inputs.int_written.get(ib).copied().unwrap_or(0);
@@ -382,9 +386,6 @@ impl SimBackend {
         };
         let seq = ints.get(1).copied();
         if seq == self.last_seq {
-            if let Some(servo) = &mut self.servo {
-                servo.since_cycles = servo.since_cycles.saturating_add(1);
-            }
             self.send_servo_target(map.extrapolate_max_s);
             return;
         }
@@ -405,7 +406,6 @@ impl SimBackend {
                     lookahead_s,
                     gain,
                     feedforward: decoded.feedforward,
-                    since_cycles: 0,
                     sent: None,
                 });
                 self.send_servo_target(map.extrapolate_max_s);
@@ -422,7 +422,7 @@ impl SimBackend {
     /// target sent last (a held target is latched already).
     fn send_servo_target(&mut self, extrapolate_max_s: f64) {
         let Some(servo) = &mut self.servo else { return };
-        let since_s = servo.since_cycles as f64 * CYCLE_S;
+        let since_s = servo.feedforward.since_valid_s(self.tick, CYCLE_S);
         let target = servo
             .feedforward
             .target(&servo.q, since_s, extrapolate_max_s);
@@ -454,6 +454,14 @@ impl EmulatorBackend for SimBackend {
         if let Some(i) = SIM_FIELDS.iter().position(|(n, _)| *n == name) {
             return SIM_FIELDS.get(i).map(|(_, t)| (OutputHandle(i), *t));
         }
+        if let Some(n) = name
+            .strip_prefix("output_int_register_")
+            .and_then(|n| n.parse::<usize>().ok())
+            .filter(|n| *n < 48)
+        {
+            // The program's tick goes to output_int_register_<int_base>; the others stay 0.
+            return Some((OutputHandle(SIM_OUTPUT_INT_BASE + n), FieldType::Int32));
+        }
         let is_output_register = name.starts_with("output_int_register_")
             || name.starts_with("output_double_register_")
             || name.starts_with("output_bit_register");
@@ -482,6 +490,12 @@ impl EmulatorBackend for SimBackend {
             12 => Value::Uint32(s.runtime_state),
             13 => Value::Uint32(s.robot_status_bits),
             14 => Value::Uint32(s.safety_status_bits),
+            h if (SIM_OUTPUT_INT_BASE..SIM_OUTPUT_INT_BASE + 48).contains(&h) => {
+                let ours = self
+                    .program
+                    .is_some_and(|m| usize::from(m.int_base) + SIM_OUTPUT_INT_BASE == h);
+                Value::Int32(if ours { self.tick } else { 0 })
+            }
             h => Value::zero(
                 FieldType::ALL
                     .get(h.saturating_sub(SIM_ZERO_BASE))
@@ -514,6 +528,7 @@ impl EmulatorBackend for SimBackend {
         tracing::info!("emulator: hrc_control program started ({map:?})");
         self.program = Some(map);
         self.program_start_cycle = self.robot.cycles();
+        self.tick = 0;
         self.last_seq = None;
         self.servo = None;
         true

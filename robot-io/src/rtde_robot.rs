@@ -84,6 +84,7 @@ impl RtdeRobotConfig {
     /// The client configuration this robot uses.
     pub fn client_config(&self) -> ClientConfig {
         let mut c = ClientConfig::new(self.host.clone(), &STATE_FIELDS);
+        c.output_fields.push(self.registers.tick_register());
         c.port = self.port;
         c.frequency_hz = self.frequency_hz;
         c.input_recipes = vec![self.registers.input_names()];
@@ -123,8 +124,11 @@ pub struct RtdeRobot {
     program: Option<ProgramSender>,
     /// Controller timestamp of the last state `read_state`/`wait_state` returned \[s\].
     read_ts: f64,
-    /// The newest received sample, peeked at by `send` (not consumed).
-    peek: OutputBuffer,
+    /// Where the program's tick is in a sample.
+    tick_slot: FieldSlot,
+    /// The program tick of the last decoded sample, and of the last state returned.
+    last_tick: i32,
+    read_tick: i32,
     /// Feedforward of the servo commands ([`Robot::send`]).
     feedforward: FeedforwardEstimator,
 }
@@ -136,7 +140,6 @@ impl RtdeRobot {
         cfg.registers.validate()?;
         let client = RtdeClient::connect(cfg.client_config()).await?;
         let buf = client.output_buffer();
-        let peek = client.output_buffer();
         let mut slots = [FieldSlot {
             offset: 0,
             ty: crate::codec::FieldType::Double,
@@ -146,6 +149,12 @@ impl RtdeRobot {
                 reason: format!("{name} missing from the output recipe"),
             })?;
         }
+        let tick_name = cfg.registers.tick_register();
+        let tick_slot = buf
+            .slot(&tick_name)
+            .ok_or_else(|| RobotIoError::RecipeMismatch {
+                reason: format!("{tick_name} missing from the output recipe"),
+            })?;
         let mut values = [Value::Int32(0); INPUT_VALUES];
         cfg.registers.encode(
             &JointCommand::Stop { decel: 1.0 },
@@ -175,7 +184,9 @@ impl RtdeRobot {
             received: false,
             program,
             read_ts: f64::NAN,
-            peek,
+            tick_slot,
+            last_tick: 0,
+            read_tick: 0,
             feedforward: FeedforwardEstimator::new(cfg.registers.feedforward_max_gap_s()),
         })
     }
@@ -244,6 +255,7 @@ impl RtdeRobot {
         self.decode()?;
         *out = self.last;
         self.read_ts = self.last.timestamp_s;
+        self.read_tick = self.last_tick;
         Ok(())
     }
 
@@ -280,23 +292,9 @@ impl RtdeRobot {
         s.runtime_state = rs.read_f64(p)? as u32;
         s.robot_status_bits = rsb.read_f64(p)? as u32;
         s.safety_status_bits = ssb.read_f64(p)? as u32;
+        self.last_tick = self.tick_slot.read_f64(p)? as i32;
         self.received = true;
         Ok(())
-    }
-}
-
-impl RtdeRobot {
-    /// The controller timestamp of the newest sample received \[s\] (peeked at: the next
-    /// `read_state` or `wait_state` is unaffected); the last one decoded if none can be read.
-    /// Never blocks, allocates nothing.
-    fn newest_timestamp(&mut self) -> f64 {
-        let [ts, ..] = self.slots.0;
-        match self.client.peek_latest(&mut self.peek) {
-            Ok(Some(_)) => ts
-                .read_f64(self.peek.payload())
-                .unwrap_or(self.last.timestamp_s),
-            _ => self.last.timestamp_s,
-        }
     }
 }
 
@@ -333,6 +331,7 @@ impl Robot for RtdeRobot {
         }
         *out = self.last;
         self.read_ts = self.last.timestamp_s;
+        self.read_tick = self.last_tick;
         Ok(())
     }
 
@@ -350,18 +349,15 @@ impl Robot for RtdeRobot {
     /// `wait_state`) returned plus one cycle; its velocity and acceleration are those of the
     /// parabola through the last three servo targets at those times
     /// ([`FeedforwardEstimator`], restarted by a non-servo command, a gap longer than
-    /// [`RegisterMap::feedforward_max_gap_s`] or a timestamp going back). Its age is the newest
-    /// controller timestamp the client has received when it is sent (peeked at, not
-    /// consumed) minus the timestamp of that read (≥ 0): the robot's next cycle is one cycle
-    /// after the newest sample, and the target was meant for the cycle after the read.
+    /// [`RegisterMap::feedforward_max_gap_s`] or a timestamp going back). Its valid tick is
+    /// the program tick of that state + 1 (the program's next cycle after it): the program
+    /// extrapolates by the time since then on its own clock, however late the target arrives.
     fn send(&mut self, cmd: &JointCommand) -> Result<()> {
         self.seq = self.seq.wrapping_add(1);
         let ff = match cmd {
             JointCommand::Servo { q, .. } => {
-                let newest_ts = self.newest_timestamp();
                 let mut ff = self.feedforward.push(self.read_ts + CONTROLLER_CYCLE_S, q);
-                let age = newest_ts - self.read_ts;
-                ff.age_s = if age.is_finite() { age.max(0.0) } else { 0.0 };
+                ff.valid_tick = self.read_tick.wrapping_add(1);
                 ff
             }
             JointCommand::Speed { .. } | JointCommand::Stop { .. } => {

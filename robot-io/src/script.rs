@@ -11,15 +11,23 @@
 //! missed a cycle; the emulator at `speedup` N runs N cycles per burst), would be held: the
 //! target becomes a staircase and every stair a velocity jump. So each servo command carries a
 //! [`ServoFeedforward`]: the joint velocity `qd` [rad/s] and acceleration `qdd` [rad/s²] of the
-//! commanded trajectory at the command's time, and its `age_s` [s] when it left the client. On
-//! every cycle the program servos to
+//! commanded trajectory at the command's time, and the program cycle `valid_tick` the target
+//! is meant for. The program counts its loop iterations (one per servoj time t, 2 ms, while it
+//! servos) in `tick` and publishes it every iteration in `output_int_register_<int_base>`; the
+//! client reads it with each state sample and sends `valid_tick` = the tick of the sample its
+//! target was computed from + 1. On every cycle the program servos to
 //!
 //! ```text
-//! target_j = q_j + qd_j·e_j + ½·qdd_j·e_j²,   δ = clamp(age + n·t, 0, extrapolate_max_s)
+//! target_j = q_j + qd_j·e_j + ½·qdd_j·e_j²,   δ = clamp((tick − valid_tick)·t, 0, extrapolate_max_s)
 //! ```
 //!
-//! where n counts the program's cycles (of t = the servoj time, 2 ms) since the sequence
-//! number last changed, `qd_j` and `qdd_j` are clamped to ±[`FEEDFORWARD_MAX_QD_RAD_S`] and
+//! so a target that reaches the program late, or that it keeps for several cycles, is
+//! extrapolated by exactly the time since it was meant to apply, measured on the program's
+//! own clock. (Until issue 10 the client sent the target's age as it saw it when sending: the
+//! newest sample it had received minus the one it read. Samples the controller had produced
+//! but the client not yet received, and the time on the wire, were missed; at `--speedup 4`
+//! on a loaded machine that left 2.3 times as many executed-jerk samples over the limit.)
+//! `qd_j` and `qdd_j` are clamped to ±[`FEEDFORWARD_MAX_QD_RAD_S`] and
 //! ±[`FEEDFORWARD_MAX_QDD_RAD_S2`], and `e_j = δ` except that a joint's target never turns
 //! back: when `qd_j·qdd_j < 0`, `e_j = min(δ, −qd_j/qdd_j)` (the target stops where its
 //! extrapolated velocity reaches zero), and a joint with `qd_j = 0` holds `q_j`. Beyond
@@ -53,6 +61,7 @@
 //! |---|---|
 //! | `input_int_register_24` (+0) | command id ([`command_id`]); the watchdog watches it |
 //! | `input_int_register_25` (+1) | sequence number (incremented per command) |
+//! | `input_int_register_26` (+2) | servoj target's valid tick (program cycle it is meant for) |
 //! | `input_double_register_24..=29` (+0..=5) | joint targets, q \[rad\] or qd [rad/s] |
 //! | `input_double_register_30` (+6) | servoj time \[s\] |
 //! | `input_double_register_31` (+7) | servoj lookahead \[s\], in [0.03, 0.2] |
@@ -60,7 +69,10 @@
 //! | `input_double_register_33` (+9) | speedj acceleration or stopj deceleration [rad/s²] |
 //! | `input_double_register_34..=39` (+10..=15) | servoj feedforward velocity qd [rad/s] |
 //! | `input_double_register_40..=45` (+16..=21) | servoj feedforward acceleration qdd [rad/s²] |
-//! | `input_double_register_46` (+22) | age of the servoj target when sent \[s\] |
+//! | `output_int_register_24` (+0) | the program's tick, written every loop iteration |
+//!
+//! The tick is a URScript `int`: 2³¹ iterations are 49.7 days at 2 ms, longer than any program
+//! run (the emulator's model takes the difference with wrapping).
 
 use std::f64::consts::PI;
 use std::time::Duration;
@@ -96,9 +108,9 @@ pub mod command_id {
 }
 
 /// Integer registers used, counted from [`RegisterMap::int_base`].
-pub const INT_REGISTERS: usize = 2;
+pub const INT_REGISTERS: usize = 3;
 /// Double registers used, counted from [`RegisterMap::double_base`].
-pub const DOUBLE_REGISTERS: usize = 23;
+pub const DOUBLE_REGISTERS: usize = 22;
 /// Values in one input package of the register protocol.
 pub const INPUT_VALUES: usize = INT_REGISTERS + DOUBLE_REGISTERS;
 
@@ -110,7 +122,6 @@ mod offset {
     pub(super) const ACC: usize = 9;
     pub(super) const QD: usize = 10;
     pub(super) const QDD: usize = 16;
-    pub(super) const AGE: usize = 22;
 }
 
 /// The controller cycle the program's extrapolation counts in \[s\] (servoj time 2 ms).
@@ -133,8 +144,9 @@ pub struct ServoFeedforward {
     pub qd: Joints,
     /// Joint acceleration of the commanded trajectory at the target's time [rad/s²].
     pub qdd: Joints,
-    /// How late the target already is when it leaves the client \[s\], ≥ 0.
-    pub age_s: f64,
+    /// The program tick (loop iteration) the target is meant for [cycles]: the tick of the
+    /// state sample it was computed from + 1.
+    pub valid_tick: i32,
 }
 
 impl ServoFeedforward {
@@ -142,28 +154,30 @@ impl ServoFeedforward {
     pub const ZERO: ServoFeedforward = ServoFeedforward {
         qd: [0.0; 6],
         qdd: [0.0; 6],
-        age_s: 0.0,
+        valid_tick: 0,
     };
 
     /// The values the program works with: non-finite values become 0, `qd` and `qdd` are
-    /// clamped to ±[`FEEDFORWARD_MAX_QD_RAD_S`] and ±[`FEEDFORWARD_MAX_QDD_RAD_S2`], the age to
-    /// ≥ 0.
+    /// clamped to ±[`FEEDFORWARD_MAX_QD_RAD_S`] and ±[`FEEDFORWARD_MAX_QDD_RAD_S2`].
     pub fn clamped(&self) -> ServoFeedforward {
         let c = |x: f64, m: f64| if x.is_finite() { x.clamp(-m, m) } else { 0.0 };
         ServoFeedforward {
             qd: self.qd.map(|v| c(v, FEEDFORWARD_MAX_QD_RAD_S)),
             qdd: self.qdd.map(|a| c(a, FEEDFORWARD_MAX_QDD_RAD_S2)),
-            age_s: if self.age_s.is_finite() {
-                self.age_s.max(0.0)
-            } else {
-                0.0
-            },
+            valid_tick: self.valid_tick,
         }
     }
 
-    /// The servo target the program commands `since_s` [s] after the target `q` [rad] arrived
-    /// (n cycles × 2 ms), extrapolating at most `max_s` [s] (the module docs give the formula).
-    /// Allocates nothing.
+    /// The time by which the program extrapolates at tick `tick`, with servoj time
+    /// `servo_time_s` [s]: `(tick − valid_tick)·t` [s] (wrapping difference; negative when
+    /// the target is meant for a later tick, which [`ServoFeedforward::target`] holds at 0).
+    pub fn since_valid_s(&self, tick: i32, servo_time_s: f64) -> f64 {
+        f64::from(tick.wrapping_sub(self.valid_tick)) * servo_time_s
+    }
+
+    /// The servo target the program commands `since_s` [s] after the time target `q` [rad]
+    /// is valid at ([`ServoFeedforward::since_valid_s`]), extrapolating at most `max_s` [s]
+    /// (the module docs give the formula). Allocates nothing.
     pub fn target(&self, q: &Joints, since_s: f64, max_s: f64) -> Joints {
         let ff = self.clamped();
         let max_s = if max_s.is_finite() {
@@ -171,7 +185,7 @@ impl ServoFeedforward {
         } else {
             0.0
         };
-        let d = ff.age_s + since_s;
+        let d = since_s;
         let d = if d.is_finite() {
             d.clamp(0.0, max_s)
         } else {
@@ -228,7 +242,8 @@ impl FeedforwardEstimator {
     }
 
     /// Adds target `q` [rad] valid at controller time `valid_at_s` \[s\] and returns the
-    /// estimate at that time (`age_s` = 0). Non-finite inputs reset it and give 0.
+    /// estimate at that time (`valid_tick` = 0: the caller sets it). Non-finite inputs reset it
+    /// and give 0.
     pub fn push(&mut self, valid_at_s: f64, q: &Joints) -> ServoFeedforward {
         if !valid_at_s.is_finite() || !q.iter().all(|v| v.is_finite()) {
             self.reset();
@@ -294,13 +309,13 @@ pub struct RegisterMap {
     /// First integer input register (24 and up: fieldbus adapters and URCaps often claim
     /// 0–23).
     pub int_base: u8,
-    /// First double input register (at most 25: the protocol uses 23 of them).
+    /// First double input register (at most 26: the protocol uses 22 of them).
     pub double_base: u8,
     /// Minimum command-register write frequency before the watchdog stops the program \[Hz\].
     pub watchdog_hz: f64,
     /// servoj time sent with each servo command \[s\] (one 500 Hz cycle by default).
     pub servo_time_s: f64,
-    /// How far the program extrapolates a servo target beyond its arrival, age included \[s\],
+    /// How far the program extrapolates a servo target beyond the time it is valid at \[s\],
     /// in [0, 1 / `watchdog_hz`]; [`DEFAULT_EXTRAPOLATE_MAX_S`] (3 cycles) on a real robot.
     /// Rendered into the program, not written to a register.
     pub extrapolate_max_s: f64,
@@ -379,6 +394,11 @@ impl RegisterMap {
         ints.chain(dbls).collect()
     }
 
+    /// Name of the output register the program writes its tick to (`output_int_register_<int_base>`).
+    pub fn tick_register(&self) -> String {
+        format!("output_int_register_{}", self.int_base)
+    }
+
     /// Name of the command register (the one the watchdog watches).
     pub fn command_register(&self) -> String {
         format!("input_int_register_{}", self.int_base)
@@ -436,7 +456,6 @@ impl RegisterMap {
             (offset::LOOKAHEAD, lookahead),
             (offset::GAIN, gain),
             (offset::ACC, acc),
-            (offset::AGE, ff.age_s),
         ];
         for (i, v) in scalars {
             if let Some(d) = doubles.get_mut(i) {
@@ -450,7 +469,7 @@ impl RegisterMap {
             *d = v;
         }
         let mut values = out.iter_mut();
-        for v in [id, seq] {
+        for v in [id, seq, ff.valid_tick] {
             if let Some(o) = values.next() {
                 *o = Value::Int32(v);
             }
@@ -467,7 +486,7 @@ impl RegisterMap {
         ints: &[i32; INT_REGISTERS],
         doubles: &[f64; DOUBLE_REGISTERS],
     ) -> Option<DecodedCommand> {
-        let [id, seq] = *ints;
+        let [id, seq, valid_tick] = *ints;
         let at = |i: usize| doubles.get(i).copied().unwrap_or(0.0);
         let joints: Joints = std::array::from_fn(at);
         let lookahead = at(offset::LOOKAHEAD);
@@ -483,7 +502,7 @@ impl RegisterMap {
                 ServoFeedforward {
                     qd: std::array::from_fn(|j| at(offset::QD + j)),
                     qdd: std::array::from_fn(|j| at(offset::QDD + j)),
-                    age_s: at(offset::AGE),
+                    valid_tick,
                 }
                 .clamped(),
             ),
@@ -516,6 +535,10 @@ impl RegisterMap {
         let mut s = CONTROL_PROGRAM_TEMPLATE
             .replace("{{INT_BASE}}", &self.int_base.to_string())
             .replace("{{INT_SEQ}}", &(usize::from(self.int_base) + 1).to_string())
+            .replace(
+                "{{INT_VALID_TICK}}",
+                &(usize::from(self.int_base) + 2).to_string(),
+            )
             .replace("{{DOUBLE_BASE}}", &self.double_base.to_string())
             .replace("{{WATCHDOG_HZ}}", &format!("{}", self.watchdog_hz))
             .replace(
@@ -530,8 +553,7 @@ impl RegisterMap {
             .replace("{{D_TIME}}", &d(offset::TIME))
             .replace("{{D_LOOKAHEAD}}", &d(offset::LOOKAHEAD))
             .replace("{{D_GAIN}}", &d(offset::GAIN))
-            .replace("{{D_ACC}}", &d(offset::ACC))
-            .replace("{{D_AGE}}", &d(offset::AGE));
+            .replace("{{D_ACC}}", &d(offset::ACC));
         for i in 0..6 {
             s = s
                 .replace(&format!("{{{{D{i}}}}}"), &d(i))
@@ -658,9 +680,8 @@ mod tests {
         assert!(!p.contains("{{"), "unrendered placeholder in:\n{p}");
         assert!(p.contains(r#"rtde_set_watchdog("input_int_register_30", 25, "stop")"#));
         assert!(p.contains("read_input_float_register(34)")); // 25 + 9: acceleration
-        assert!(p.contains("read_input_float_register(47) + since * t")); // 25 + 22: age
-        assert!(p.contains("seq = read_input_integer_register(31)"));
-        assert!(p.contains("clamp(read_input_float_register(47) + since * t, 0.0, 0.02)"));
+        assert!(p.contains("write_output_integer_register(30, tick)"));
+        assert!(p.contains("clamp((tick - read_input_integer_register(32)) * t, 0.0, 0.02)"));
         assert!(p.contains("vc = clamp(v, -3.141592653589793, 3.141592653589793)"));
         assert!(p.contains("ac = clamp(a, -3.141592653589793, 3.141592653589793)"));
         assert!(p.contains(
@@ -671,37 +692,39 @@ mod tests {
         // Every register of the protocol is read, and no other.
         let doubles: BTreeSet<usize> = (25..25 + DOUBLE_REGISTERS).collect();
         assert_eq!(registers_read(&p, "float"), doubles);
-        assert_eq!(registers_read(&p, "integer"), BTreeSet::from([30, 31]));
+        assert_eq!(registers_read(&p, "integer"), BTreeSet::from([30, 32]));
         assert_eq!(RegisterMap::from_program(&p), Some(map));
         assert_eq!(RegisterMap::from_program("def other():\nend\n"), None);
         // The default renders the 6 ms bound with a decimal point.
         let d = RegisterMap::default().program();
         assert!(d.contains("extrapolate_max_s=0.006"), "{d}");
-        assert!(d.contains("since * t, 0.0, 0.006)"));
+        assert!(d.contains(") * t, 0.0, 0.006)"));
         assert_eq!(RegisterMap::from_program(&d), Some(RegisterMap::default()));
         let zero = RegisterMap {
             extrapolate_max_s: 0.0,
             ..RegisterMap::default()
         };
-        assert!(zero.program().contains("since * t, 0.0, 0.0)"));
+        assert!(zero.program().contains(") * t, 0.0, 0.0)"));
     }
 
     #[test]
     fn out_of_range_registers_and_bounds_are_refused() {
         assert!(RegisterMap::default().validate().is_ok());
-        // 23 double registers: base 25 ends at 47, base 26 would need 48.
+        // 22 double registers: base 26 ends at 47, base 27 would need 48; 3 int registers:
+        // base 45 ends at 47.
         let top = RegisterMap {
-            double_base: 25,
+            int_base: 45,
+            double_base: 26,
             ..RegisterMap::default()
         };
         assert!(top.validate().is_ok());
         for bad in [
             RegisterMap {
-                double_base: 26,
+                double_base: 27,
                 ..RegisterMap::default()
             },
             RegisterMap {
-                int_base: 47,
+                int_base: 46,
                 ..RegisterMap::default()
             },
             RegisterMap {
@@ -731,14 +754,15 @@ mod tests {
     }
 
     fn decode_values(v: &[Value; INPUT_VALUES]) -> Option<DecodedCommand> {
-        let ints = [v[0], v[1]].map(|x| match x {
+        let ints = [v[0], v[1], v[2]].map(|x| match x {
             Value::Int32(i) => i,
             _ => panic!("not an int: {x:?}"),
         });
-        let doubles: [f64; DOUBLE_REGISTERS] = std::array::from_fn(|i| match v[2 + i] {
-            Value::Double(d) => d,
-            x => panic!("not a double: {x:?}"),
-        });
+        let doubles: [f64; DOUBLE_REGISTERS] =
+            std::array::from_fn(|i| match v[INT_REGISTERS + i] {
+                Value::Double(d) => d,
+                x => panic!("not a double: {x:?}"),
+            });
         RegisterMap::decode(&ints, &doubles)
     }
 
@@ -749,15 +773,16 @@ mod tests {
         assert_eq!(names.len(), INPUT_VALUES);
         assert_eq!(names[0], "input_int_register_24");
         assert_eq!(names[1], "input_int_register_25");
-        assert_eq!(names[2], "input_double_register_24");
-        assert_eq!(names[11], "input_double_register_33");
-        assert_eq!(names[12], "input_double_register_34"); // qd of joint 0
-        assert_eq!(names[18], "input_double_register_40"); // qdd of joint 0
-        assert_eq!(names[24], "input_double_register_46"); // age
+        assert_eq!(names[2], "input_int_register_26"); // valid tick
+        assert_eq!(names[3], "input_double_register_24");
+        assert_eq!(names[12], "input_double_register_33");
+        assert_eq!(names[13], "input_double_register_34"); // qd of joint 0
+        assert_eq!(names[19], "input_double_register_40"); // qdd of joint 0
+        assert_eq!(names[24], "input_double_register_45"); // qdd of joint 5
         let ff = ServoFeedforward {
             qd: [0.5, -0.25, 0.0, 1.0, -3.0, 0.125],
             qdd: [1.5, -2.0, 0.0, 0.5, 3.0, -0.75],
-            age_s: 0.004,
+            valid_tick: 4321,
         };
         let servo = JointCommand::Servo {
             q: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6],
@@ -766,9 +791,9 @@ mod tests {
         };
         let mut v = [Value::Int32(0); INPUT_VALUES];
         map.encode(&servo, &ff, 7, &mut v);
-        assert_eq!(v[12], Value::Double(0.5));
-        assert_eq!(v[23], Value::Double(-0.75));
-        assert_eq!(v[24], Value::Double(0.004));
+        assert_eq!(v[2], Value::Int32(4321));
+        assert_eq!(v[13], Value::Double(0.5));
+        assert_eq!(v[24], Value::Double(-0.75));
         assert_eq!(
             decode_values(&v),
             Some(DecodedCommand {
@@ -786,7 +811,8 @@ mod tests {
             JointCommand::Stop { decel: 2.0 },
         ] {
             map.encode(&cmd, &ff, 8, &mut v);
-            assert!(v[12..].iter().all(|x| *x == Value::Double(0.0)));
+            assert_eq!(v[2], Value::Int32(0));
+            assert!(v[13..].iter().all(|x| *x == Value::Double(0.0)));
             assert_eq!(
                 decode_values(&v),
                 Some(DecodedCommand {
@@ -797,11 +823,11 @@ mod tests {
             );
         }
         // Out-of-range lookahead, gain and feedforward are clamped as the program does;
-        // NaN feedforward and a negative age become 0.
+        // NaN feedforward becomes 0; any valid tick passes (the program clamps δ).
         let wild = ServoFeedforward {
             qd: [10.0, -10.0, f64::NAN, 0.0, 0.0, 0.0],
             qdd: [-10.0, 10.0, f64::INFINITY, 0.0, 0.0, 0.0],
-            age_s: -1.0,
+            valid_tick: i32::MIN,
         };
         map.encode(
             &JointCommand::Servo {
@@ -824,54 +850,71 @@ mod tests {
         );
         assert_eq!(d.feedforward.qd, [PI, -PI, 0.0, 0.0, 0.0, 0.0]);
         assert_eq!(d.feedforward.qdd, [-PI, PI, 0.0, 0.0, 0.0, 0.0]);
-        assert_eq!(d.feedforward.age_s, 0.0);
+        assert_eq!(d.feedforward.valid_tick, i32::MIN);
         let doubles: [f64; DOUBLE_REGISTERS] =
-            std::array::from_fn(|i| v[2 + i].component(0).unwrap());
-        assert_eq!(RegisterMap::decode(&[0, 1], &doubles), None);
+            std::array::from_fn(|i| v[INT_REGISTERS + i].component(0).unwrap());
+        assert_eq!(RegisterMap::decode(&[0, 1, 0], &doubles), None);
     }
 
-    fn one_joint(qd: f64, qdd: f64, age_s: f64) -> ServoFeedforward {
+    fn one_joint(qd: f64, qdd: f64) -> ServoFeedforward {
         ServoFeedforward {
             qd: [qd, 0.0, 0.0, 0.0, 0.0, 0.0],
             qdd: [qdd, 0.0, 0.0, 0.0, 0.0, 0.0],
-            age_s,
+            valid_tick: 100,
         }
     }
 
     #[test]
+    fn the_time_since_the_valid_tick_counts_program_cycles() {
+        // Worked by hand: valid at tick 100, now tick 103, t = 2 ms: 3 · 0.002 = 0.006 s.
+        let ff = one_joint(0.5, 0.0);
+        assert!((ff.since_valid_s(103, 0.002) - 0.006).abs() < 1e-15);
+        assert_eq!(ff.since_valid_s(100, 0.002), 0.0);
+        // Early (meant for a later tick): negative, and `target` holds it at δ = 0.
+        assert!((ff.since_valid_s(98, 0.002) + 0.004).abs() < 1e-15);
+        let q = [1.0; 6];
+        assert_eq!(ff.target(&q, ff.since_valid_s(98, 0.002), 0.006), q);
+        // Across the i32 wrap: valid at i32::MAX, now i32::MIN + 1 is 2 ticks later.
+        let wrap = ServoFeedforward {
+            valid_tick: i32::MAX,
+            ..ff
+        };
+        assert!((wrap.since_valid_s(i32::MIN + 1, 0.002) - 0.004).abs() < 1e-15);
+    }
+
+    #[test]
     fn extrapolated_target_worked_examples() {
-        // Worked by hand. q = 1 rad, qd = 0.5 rad/s, qdd = 2 rad/s², age 1 ms, 2 cycles
-        // (4 ms) after arrival, bound 6 ms: δ = 5 ms,
+        // Worked by hand. q = 1 rad, qd = 0.5 rad/s, qdd = 2 rad/s², 5 ms after the time the
+        // target is valid at, bound 6 ms: δ = 5 ms,
         // target = 1 + 0.5·0.005 + ½·2·0.005² = 1 + 0.0025 + 0.000025 = 1.002525.
         let q = [1.0, 2.0, 0.0, 0.0, 0.0, 0.0];
-        let ff = one_joint(0.5, 2.0, 0.001);
-        let t = ff.target(&q, 0.004, 0.006);
+        let ff = one_joint(0.5, 2.0);
+        let t = ff.target(&q, 0.005, 0.006);
         assert!((t[0] - 1.002525).abs() < 1e-12, "{}", t[0]);
         assert_eq!(t[1], 2.0); // no feedforward: held
         // Past the bound it holds at δ = 6 ms: 1 + 0.003 + ½·2·0.006² = 1.003036.
-        for since in [0.005, 0.006, 0.1, 1e9] {
+        for since in [0.006, 0.0061, 0.1, 1e9] {
             let t = ff.target(&q, since, 0.006);
             assert!((t[0] - 1.003036).abs() < 1e-12, "{since}: {}", t[0]);
         }
-        // A late command (age 4 ms) is extrapolated by its age on arrival:
+        // A command 4 ms late on arrival is extrapolated by those 4 ms at once:
         // 1 + 0.5·0.004 + ½·2·0.004² = 1.002016.
-        let late = one_joint(0.5, 2.0, 0.004);
-        assert!((late.target(&q, 0.0, 0.006)[0] - 1.002016).abs() < 1e-12);
+        assert!((ff.target(&q, 0.004, 0.006)[0] - 1.002016).abs() < 1e-12);
         // Decelerating: qd = 0.01 rad/s, qdd = −10 clamped to −π. The target stops where
         // 0.01 − π·e = 0, e = 3.1831 ms < 6 ms, at q + ½·0.01·e = q + 1.59155e-5 rad.
-        let braking = one_joint(0.01, -10.0, 0.0);
+        let braking = one_joint(0.01, -10.0);
         let t = braking.target(&q, 0.006, 0.006);
         let e = 0.01 / PI;
         assert!((e - 0.0031831).abs() < 1e-7);
         assert!((t[0] - (1.0 + 0.5 * 0.01 * e)).abs() < 1e-15);
         assert!((t[0] - 1.0000159155).abs() < 1e-10);
         // qd = 0: the acceleration alone never starts a motion.
-        assert_eq!(one_joint(0.0, 3.0, 0.0).target(&q, 0.006, 0.006), q);
-        // No extrapolation with a zero bound, or at δ = 0 (on time, on arrival).
+        assert_eq!(one_joint(0.0, 3.0).target(&q, 0.006, 0.006), q);
+        // No extrapolation with a zero bound, or at δ = 0 (on time).
         assert_eq!(ff.target(&q, 0.004, 0.0), q);
-        assert_eq!(one_joint(0.5, 2.0, 0.0).target(&q, 0.0, 0.006), q);
+        assert_eq!(ff.target(&q, 0.0, 0.006), q);
         // At the UR5e limits the safety bound: π·0.006 + ½·π·0.006² ≈ 0.0189 rad.
-        let fastest = one_joint(100.0, 100.0, 1.0);
+        let fastest = one_joint(100.0, 100.0);
         let reach = fastest.target(&q, 1.0, 0.006)[0] - 1.0;
         assert!((reach - (PI * 0.006 + 0.5 * PI * 0.006 * 0.006)).abs() < 1e-15);
         assert!(reach < 0.019);
@@ -889,12 +932,11 @@ mod tests {
             q in joints(),
             qd in proptest::array::uniform6(-5.0..5.0f64),
             qdd in proptest::array::uniform6(-5.0..5.0f64),
-            age in -0.01..0.05f64,
-            since in 0.0..0.05f64,
+            since in -0.01..0.05f64,
             later in 0.0..0.05f64,
             max in 0.0..0.05f64,
         ) {
-            let ff = ServoFeedforward { qd, qdd, age_s: age };
+            let ff = ServoFeedforward { qd, qdd, valid_tick: 0 };
             let c = ff.clamped();
             let t = ff.target(&q, since, max);
             let t2 = ff.target(&q, since + later, max);
@@ -905,7 +947,7 @@ mod tests {
                 prop_assert!((t[j] - q[j]) * c.qd[j] >= 0.0);
                 prop_assert!((t2[j] - q[j]).abs() >= (t[j] - q[j]).abs() - 1e-15);
                 prop_assert!((t2[j] - q[j]).abs() <= (held[j] - q[j]).abs() + 1e-15);
-                if since + age.max(0.0) >= max {
+                if since >= max {
                     prop_assert_eq!(t[j], held[j]);
                 }
             }
@@ -937,7 +979,7 @@ mod tests {
                 prop_assert_eq!(ff.qd[0], 0.0);
                 prop_assert_eq!(ff.qdd[0], 0.0);
             }
-            prop_assert_eq!(ff.age_s, 0.0);
+            prop_assert_eq!(ff.valid_tick, 0);
         }
     }
 
