@@ -46,7 +46,7 @@ const LANDMARKS_FILE: &str = "landmarks.csv";
 
 /// Arguments of `hrc-adapt assess`.
 #[derive(Debug, Args)]
-pub(crate) struct AssessArgs {
+pub struct AssessArgs {
     /// Cues: a cue CSV file, a KTH handover folder, a video file (.mp4 .avi .mkv .mov), an
     /// image folder, a RealSense .bag (feature `realsense`), `camera` (a RealSense camera if
     /// built with `realsense` and one is connected, else the first webcam) or `webcam:N`.
@@ -129,7 +129,8 @@ struct Report {
     files: Vec<PathBuf>,
 }
 
-pub(crate) fn run(args: AssessArgs) -> anyhow::Result<()> {
+/// Runs `hrc-adapt assess`: assesses the recording and writes the results into `--out`.
+pub fn run(args: AssessArgs) -> anyhow::Result<()> {
     let report = assess(&args)?;
     print!("{}", report.summary());
     Ok(())

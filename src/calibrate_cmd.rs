@@ -33,7 +33,7 @@ use crate::vision_cmd::{
 
 /// Arguments of `hrc-adapt calibrate`.
 #[derive(Debug, Args)]
-pub(crate) struct CalibrateArgs {
+pub struct CalibrateArgs {
     /// A colour image (PNG, JPEG, ...) of the board lying on the table.
     #[arg(long, conflicts_with = "camera")]
     image: Option<PathBuf>,
@@ -93,7 +93,8 @@ struct Outcome {
     spread_m: f64,
 }
 
-pub(crate) fn run(args: CalibrateArgs) -> anyhow::Result<()> {
+/// Runs `hrc-adapt calibrate`: prints the board, or writes the extrinsics file.
+pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     let board = BoardSpec::from_toml_file(&args.board)
         .with_context(|| format!("loading the board {}", args.board.display()))?;
     if let Some(png) = &args.print_board {

@@ -38,7 +38,7 @@ use crate::trial::{CueSource, TrialSpec, run_simulated};
 
 /// Arguments of `hrc-adapt experiment`.
 #[derive(Debug, Args)]
-pub(crate) struct ExperimentArgs {
+pub struct ExperimentArgs {
     /// The experiment TOML (participants, conditions, policies, seed, trial config).
     #[arg(long)]
     config: PathBuf,
@@ -305,7 +305,7 @@ fn run_one(trial: PlannedTrial, trial_config: &TrialConfig, dir: &Path) -> Trial
 }
 
 /// Runs `hrc-adapt experiment`.
-pub(crate) fn run(args: ExperimentArgs) -> anyhow::Result<()> {
+pub fn run(args: ExperimentArgs) -> anyhow::Result<()> {
     if let Some(participant) = &args.participant {
         return run_real_session(&args, participant);
     }

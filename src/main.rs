@@ -1,24 +1,9 @@
-//! `hrc-adapt`: the command-line front of the workspace. Thin: each subcommand lives in its own
-//! module and calls into the library crates.
-
-mod assess_cmd;
-#[cfg(feature = "vision")]
-mod calibrate_cmd;
-mod experiment;
-mod report;
-mod robot_cmd;
-mod stats;
-mod trial;
-mod vision_cmd;
+//! `hrc-adapt`: the command-line front of the workspace. Thin: the CLI ([`Cli`]), the dispatch
+//! onto the `hrc_adapt` library's commands, and the exit codes. The only place `anyhow` is
+//! used: it prints the library's [`hrc_adapt::Error`] with its whole chain of causes.
 
 use clap::{Parser, Subcommand};
-
-/// Tests count the allocations of the control cycle (thread-local: only a counted section of
-/// the test's own thread; see `trial::control`'s tests).
-#[cfg(test)]
-#[global_allocator]
-static ALLOCATOR: hrc_adapt_tests::alloc_count::CountingAllocator =
-    hrc_adapt_tests::alloc_count::CountingAllocator;
+use hrc_adapt::{assess_cmd, experiment, robot_cmd, trial};
 
 /// Adapts a UR5e cobot to its human operator from vision-based cognitive-workload assessment.
 #[derive(Debug, Parser)]
@@ -34,7 +19,7 @@ enum Command {
     Assess(assess_cmd::AssessArgs),
     /// Calibrate the camera against the ChArUco board (extrinsics file), or print the board.
     #[cfg(feature = "vision")]
-    Calibrate(calibrate_cmd::CalibrateArgs),
+    Calibrate(hrc_adapt::calibrate_cmd::CalibrateArgs),
     /// Record a live UR controller (or the emulator) over RTDE into a CSV trace.
     Record(robot_cmd::RecordArgs),
     /// Serve a UR controller emulator (RTDE, dashboard, script ports) on loopback.
@@ -75,19 +60,19 @@ fn run() -> anyhow::Result<()> {
         .init();
     let cli = Cli::parse();
     match cli.command {
-        Command::Assess(args) => assess_cmd::run(args),
+        Command::Assess(args) => assess_cmd::run(args)?,
         #[cfg(feature = "vision")]
-        Command::Calibrate(args) => calibrate_cmd::run(args),
-        Command::Record(args) => robot_cmd::record(args),
-        Command::Emulate(args) => robot_cmd::emulate(args),
-        Command::Trial(args) => trial::run(args),
-        Command::Experiment(args) => experiment::run(args),
+        Command::Calibrate(args) => hrc_adapt::calibrate_cmd::run(args)?,
+        Command::Record(args) => robot_cmd::record(args)?,
+        Command::Emulate(args) => robot_cmd::emulate(args)?,
+        Command::Trial(args) => trial::run(args)?,
+        Command::Experiment(args) => experiment::run(args)?,
         Command::Config(args) => {
             anyhow::ensure!(args.print_default, "nothing to do: pass --print-default");
             print!("{}", assess::AssessConfig::default().to_toml_string()?);
-            Ok(())
         }
     }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -16,7 +16,7 @@ use robot_io::trace::{Trace, TraceWriter, WriteOptions};
 
 /// Arguments of `hrc-adapt record`.
 #[derive(Debug, Args)]
-pub(crate) struct RecordArgs {
+pub struct RecordArgs {
     /// Controller host (a UR5e, URSim, or the emulator).
     #[arg(long)]
     robot: String,
@@ -41,7 +41,7 @@ pub(crate) struct RecordArgs {
 /// Arguments of `hrc-adapt emulate`.
 #[derive(Debug, Args)]
 #[command(group(clap::ArgGroup::new("backend").required(true).args(["sim", "trace"])))]
-pub(crate) struct EmulateArgs {
+pub struct EmulateArgs {
     /// Back the emulator with the in-process UR5e model (executes our control program's
     /// register protocol).
     #[arg(long)]
@@ -81,7 +81,8 @@ fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
         .context("starting the tokio runtime")
 }
 
-pub(crate) fn record(args: RecordArgs) -> anyhow::Result<()> {
+/// Runs `hrc-adapt record`: records the controller over RTDE into a CSV trace until Ctrl-C.
+pub fn record(args: RecordArgs) -> anyhow::Result<()> {
     runtime()?.block_on(record_async(args))
 }
 
@@ -191,7 +192,8 @@ async fn record_async(args: RecordArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-pub(crate) fn emulate(args: EmulateArgs) -> anyhow::Result<()> {
+/// Runs `hrc-adapt emulate`: serves the controller emulator until Ctrl-C.
+pub fn emulate(args: EmulateArgs) -> anyhow::Result<()> {
     runtime()?.block_on(emulate_async(args))
 }
 

@@ -17,47 +17,47 @@ pub(crate) const MAX_LEAD_TIME_S: f64 = 600.0;
 /// The trial configuration file (every key is documented in `config/trial.toml`).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct TrialConfig {
+pub struct TrialConfig {
     /// Workspace calibration file (relative to the config file once loaded: absolute here).
-    pub(crate) workspace: PathBuf,
+    pub workspace: PathBuf,
     /// Controller file (`adapt::controller::RawHandoverFile`).
-    pub(crate) controller: PathBuf,
+    pub controller: PathBuf,
     /// Adaptive policy rule table.
-    pub(crate) policy_table: PathBuf,
+    pub policy_table: PathBuf,
     /// Assessment model constants; `None` for the defaults.
     #[serde(default)]
-    pub(crate) assess: Option<PathBuf>,
+    pub assess: Option<PathBuf>,
     /// Cue and assessment rate [Hz].
-    pub(crate) cue_rate_hz: f64,
+    pub cue_rate_hz: f64,
     /// Longest simulated trial [s].
-    pub(crate) max_duration_s: f64,
+    pub max_duration_s: f64,
     /// The robot starts fetching part k this long before the operator's nominal need [s].
-    pub(crate) lead_time_s: f64,
+    pub lead_time_s: f64,
     /// Log every 500 Hz robot state (and separation sample) instead of decimating to 100 Hz.
     #[serde(default)]
-    pub(crate) robot_full_rate: bool,
+    pub robot_full_rate: bool,
     /// Workspace → base transform.
-    pub(crate) frame: FrameConfig,
+    pub frame: FrameConfig,
     /// What happens when the robot link is lost (`[link]`; defaults without the table).
     #[serde(default)]
-    pub(crate) link: LinkConfig,
+    pub link: LinkConfig,
     /// When a task counts as impossible (`[progress]`; defaults without the table).
     #[serde(default)]
-    pub(crate) progress: ProgressConfig,
+    pub progress: ProgressConfig,
 }
 
 /// `[link]`: a lost robot link (RTDE robots only; see `runtime.rs`, "Link loss").
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub(crate) struct LinkConfig {
+pub struct LinkConfig {
     /// No new robot state for this long (wall time) is a link loss [s], in [0.01, 60]. The
     /// supervisor has stopped the robot long before (SAF-REQ-009, after 3 missed cycles).
-    pub(crate) lost_after_s: f64,
+    pub lost_after_s: f64,
     /// Resume the trial once the link is back (else it ends as `link_lost`).
-    pub(crate) resume: bool,
+    pub resume: bool,
     /// With `resume`: end as `link_lost` if the link is not back this long after the loss
     /// (wall time) [s], in (0, 3600].
-    pub(crate) resume_within_s: f64,
+    pub resume_within_s: f64,
 }
 
 impl Default for LinkConfig {
@@ -73,10 +73,10 @@ impl Default for LinkConfig {
 /// `[progress]`: when a task counts as impossible.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub(crate) struct ProgressConfig {
+pub struct ProgressConfig {
     /// A motion phase (fetch, approach, retreat) that gets no closer to its target for this
     /// long (trial time) ends the trial as `task_impossible` [s], in [0.1, 3600].
-    pub(crate) stuck_after_s: f64,
+    pub stuck_after_s: f64,
 }
 
 impl Default for ProgressConfig {
@@ -90,11 +90,11 @@ impl Default for ProgressConfig {
 /// The robot base pose in the workspace frame.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct FrameConfig {
+pub struct FrameConfig {
     /// Base origin in the workspace frame [m].
-    pub(crate) robot_base_origin_m: [f64; 3],
+    pub robot_base_origin_m: [f64; 3],
     /// Yaw of the base axes about z, relative to the workspace axes [deg].
-    pub(crate) robot_base_yaw_deg: f64,
+    pub robot_base_yaw_deg: f64,
 }
 
 impl FrameConfig {
@@ -125,11 +125,11 @@ impl FrameConfig {
 }
 
 /// The shipped `config/trial.toml`, embedded (its relative paths resolve against `config/`).
-pub(crate) const SHIPPED_TOML: &str = include_str!("../../config/trial.toml");
+pub const SHIPPED_TOML: &str = include_str!("../../config/trial.toml");
 
 impl TrialConfig {
     /// Parses `text`; relative paths are resolved against `base_dir`.
-    pub(crate) fn from_toml_str(text: &str, base_dir: &Path) -> anyhow::Result<TrialConfig> {
+    pub fn from_toml_str(text: &str, base_dir: &Path) -> anyhow::Result<TrialConfig> {
         let mut cfg: TrialConfig = toml::from_str(text).context("parsing the trial config")?;
         for p in [
             &mut cfg.workspace,
@@ -181,7 +181,7 @@ impl TrialConfig {
     }
 
     /// Reads a config file.
-    pub(crate) fn from_file(path: &Path) -> anyhow::Result<TrialConfig> {
+    pub fn from_file(path: &Path) -> anyhow::Result<TrialConfig> {
         let text =
             std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
         let dir = path.parent().unwrap_or(Path::new("."));
@@ -189,7 +189,7 @@ impl TrialConfig {
     }
 
     /// The shipped config, with paths under this repository's `config/`.
-    pub(crate) fn shipped() -> anyhow::Result<TrialConfig> {
+    pub fn shipped() -> anyhow::Result<TrialConfig> {
         Self::from_toml_str(
             SHIPPED_TOML,
             &Path::new(env!("CARGO_MANIFEST_DIR")).join("config"),

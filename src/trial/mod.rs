@@ -15,7 +15,7 @@
 //!   `report.html`), fed directly by the runtime.
 
 mod backend;
-pub(crate) mod config;
+pub mod config;
 mod control;
 mod cue_cycle;
 mod cues;
@@ -23,10 +23,10 @@ mod events;
 #[cfg(feature = "vision")]
 mod live;
 mod log;
-pub(crate) mod operator;
+pub mod operator;
 pub(crate) mod prompt;
 mod report;
-pub(crate) mod runtime;
+pub mod runtime;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -38,11 +38,11 @@ use policies::PolicyKind;
 
 #[allow(unused_imports)] // for the experiment runner
 pub(crate) use cues::CueSource;
-pub(crate) use runtime::{TrialSpec, run_simulated};
+pub use runtime::{TrialSpec, run_simulated};
 
 /// Arguments of `hrc-adapt trial`.
 #[derive(Debug, Args)]
-pub(crate) struct TrialArgs {
+pub struct TrialArgs {
     /// Participant id, used in the run folder name: 1 to 32 letters, digits, `_` or `-`
     /// ([A-Za-z0-9_-]{1,32}), so it cannot lead out of `--out-root`.
     #[arg(long, default_value = "P00", value_parser = participant_id)]
@@ -100,7 +100,7 @@ pub(crate) struct TrialArgs {
 }
 
 /// Runs `hrc-adapt trial`.
-pub(crate) fn run(args: TrialArgs) -> anyhow::Result<()> {
+pub fn run(args: TrialArgs) -> anyhow::Result<()> {
     let config = match &args.config {
         Some(p) => config::TrialConfig::from_file(p)?,
         None => config::TrialConfig::shipped()?,
@@ -307,7 +307,7 @@ pub(crate) fn cue_source(
 
 /// The process exit code for an error of `hrc-adapt trial` or `experiment`: the trial's
 /// ([`runtime::exit_code`], README "Exit codes") when a trial ended abnormally, else 1.
-pub(crate) fn exit_code(e: &anyhow::Error) -> u8 {
+pub fn exit_code(e: &anyhow::Error) -> u8 {
     e.downcast_ref::<runtime::TrialEnded>()
         .map_or(1, runtime::TrialEnded::exit_code)
 }

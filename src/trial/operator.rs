@@ -47,7 +47,7 @@ use super::events::TrialEvent;
 
 /// Experimental condition (task complexity level) of the paper.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub(crate) enum Level {
+pub enum Level {
     /// One delivered component.
     L1,
     /// Two components and a screwdriver.
@@ -58,7 +58,7 @@ pub(crate) enum Level {
 
 impl Level {
     /// `L1`, `L2` or `L3`.
-    pub(crate) fn as_str(self) -> &'static str {
+    pub fn as_str(self) -> &'static str {
         match self {
             Level::L1 => "L1",
             Level::L2 => "L2",

@@ -55,17 +55,17 @@ const CYCLE_S: f64 = 0.002;
 
 /// Everything that defines one simulated trial.
 #[derive(Debug, Clone)]
-pub(crate) struct TrialSpec {
+pub struct TrialSpec {
     /// Participant id (folder name and summary).
-    pub(crate) participant: String,
+    pub participant: String,
     /// Task complexity level.
-    pub(crate) condition: Level,
+    pub condition: Level,
     /// Policy.
-    pub(crate) policy: PolicyKind,
+    pub policy: PolicyKind,
     /// Seed of the simulated operator.
-    pub(crate) seed: u64,
+    pub seed: u64,
     /// The trial configuration.
-    pub(crate) config: TrialConfig,
+    pub config: TrialConfig,
 }
 
 /// A `SimRobot` advanced one 2 ms cycle by each `read_state` (the mock clock): read → decide →
@@ -246,28 +246,28 @@ impl CycleTimer {
 /// Why a trial ended: `summary.json`'s `finish_reason`, the `Finished` event's reason. The
 /// first three are normal endings (`Ok`, exit code 0); every other one is a [`TrialEnded`]
 /// error with its own exit code ([`exit_code`]; the table is in the README, "Exit codes").
-pub(crate) mod reason {
+pub mod reason {
     /// Every handover done (the simulated operator finished its task).
-    pub(crate) const COMPLETED: &str = "completed";
+    pub const COMPLETED: &str = "completed";
     /// `max_duration_s` of trial time reached.
-    pub(crate) const MAX_DURATION: &str = "max_duration";
+    pub const MAX_DURATION: &str = "max_duration";
     /// The recorded cue file, or the live camera, ended.
-    pub(crate) const CUES_ENDED: &str = "cues_ended";
+    pub const CUES_ENDED: &str = "cues_ended";
     /// Ctrl-C (the stop flag).
-    pub(crate) const INTERRUPTED: &str = "interrupted";
+    pub const INTERRUPTED: &str = "interrupted";
     /// No robot state for `[link] lost_after_s`, and no resume (disabled, or the link not back
     /// within `resume_within_s`).
-    pub(crate) const LINK_LOST: &str = "link_lost";
+    pub const LINK_LOST: &str = "link_lost";
     /// A motion phase made no progress toward its target for `[progress] stuck_after_s`.
-    pub(crate) const TASK_IMPOSSIBLE: &str = "task_impossible";
+    pub const TASK_IMPOSSIBLE: &str = "task_impossible";
     /// The robot's control program stopped (pendant, protective stop, watchdog).
-    pub(crate) const ROBOT_PROGRAM_STOPPED: &str = "robot_program_stopped";
+    pub const ROBOT_PROGRAM_STOPPED: &str = "robot_program_stopped";
     /// An error inside the loop (a failed read, a log write, a panic, the camera failing).
-    pub(crate) const ERROR: &str = "error";
+    pub const ERROR: &str = "error";
 }
 
 /// The process exit code of a trial that ended with `reason` (README, "Exit codes").
-pub(crate) fn exit_code(reason: &str) -> u8 {
+pub fn exit_code(reason: &str) -> u8 {
     match reason {
         reason::COMPLETED | reason::MAX_DURATION | reason::CUES_ENDED => 0,
         reason::LINK_LOST => 3,
@@ -282,17 +282,17 @@ pub(crate) fn exit_code(reason: &str) -> u8 {
 /// ended before the logs were opened, e.g. Ctrl-C at the confirmation prompt) and what went
 /// wrong. Displayed as one line naming both; the cause is its `source`.
 #[derive(Debug)]
-pub(crate) struct TrialEnded {
+pub struct TrialEnded {
     /// The `finish_reason`.
-    pub(crate) reason: &'static str,
+    pub reason: &'static str,
     /// The run folder, with its finished logs.
-    pub(crate) dir: Option<PathBuf>,
+    pub dir: Option<PathBuf>,
     error: anyhow::Error,
 }
 
 impl TrialEnded {
     /// A trial stopped before its logs were opened (nothing moved).
-    pub(crate) fn before_start(reason: &'static str, error: anyhow::Error) -> Self {
+    pub fn before_start(reason: &'static str, error: anyhow::Error) -> Self {
         Self {
             reason,
             dir: None,
@@ -301,7 +301,7 @@ impl TrialEnded {
     }
 
     /// The process exit code ([`exit_code`]).
-    pub(crate) fn exit_code(&self) -> u8 {
+    pub fn exit_code(&self) -> u8 {
         exit_code(self.reason)
     }
 }
@@ -1609,7 +1609,7 @@ fn stop_robot<R: Robot>(
 /// Run one simulated trial (simulated operator, in-process `SimRobot`, mock clock) into
 /// `out_dir` and return it. Thread-safe: each call owns all its state.
 #[allow(dead_code)] // called by the experiment runner
-pub(crate) fn run_simulated(
+pub fn run_simulated(
     spec: &TrialSpec,
     out_dir: &Path,
     show_progress: bool,
