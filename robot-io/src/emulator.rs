@@ -42,6 +42,10 @@ use crate::trace::Trace;
 use crate::types::{JointCommand, Joints, Robot, RobotState};
 use crate::{Result, RobotIoError};
 
+#[path = "sim_fields.rs"]
+pub mod sim_fields;
+use sim_fields::{IoEcho, SimFields};
+
 /// Controller cycle \[s\].
 pub const CYCLE_S: f64 = 0.002;
 /// Input registers per kind on e-Series (0..=47).
@@ -195,6 +199,9 @@ pub struct InputRegisters {
     pub int_written: [u64; REGISTERS],
     /// Current virtual cycle (1 for the first step).
     pub cycle: u64,
+    /// Digital and analog outputs and input bit registers 0–63 as clients last wrote them
+    /// (echoed in the outputs).
+    pub io: IoEcho,
 }
 
 impl Default for InputRegisters {
@@ -205,6 +212,7 @@ impl Default for InputRegisters {
             bits: 0,
             int_written: [0; REGISTERS],
             cycle: 0,
+            io: IoEcho::default(),
         }
     }
 }
@@ -230,31 +238,32 @@ pub trait EmulatorBackend: Send + std::fmt::Debug + 'static {
     fn load_program(&mut self, script: &str) -> bool;
     /// A dashboard command; returns the reply line (without newline).
     fn dashboard(&mut self, cmd: DashboardCommand) -> String;
+    /// The program's runtime state now (`runtime_state` values), for the dashboard's
+    /// `programState` and `running`.
+    fn runtime_state(&self) -> u32 {
+        crate::types::runtime_state::STOPPED
+    }
+    /// Dashboard `load <program>`: whether the program was loaded (default: refused).
+    fn load_urp(&mut self, _path: &str) -> bool {
+        false
+    }
+    /// The program loaded through the dashboard, if any.
+    fn loaded_program(&self) -> Option<&str> {
+        None
+    }
+    /// Dashboard `restart safety`: clears safety faults and stops (powered off, as a
+    /// controller leaves the arm); whether it was done (default: refused).
+    fn restart_safety(&mut self) -> bool {
+        false
+    }
+    /// A client's input recipe set the speed slider to `fraction` [-] (default: ignored).
+    fn speed_slider(&mut self, _fraction: f64) {}
     /// For tests and tools that need the concrete backend.
     fn as_any_mut(&mut self) -> &mut dyn Any;
 }
 
 // ---------------------------------------------------------------------------------------------
 // SimRobot-backed.
-
-/// Output fields a [`SimBackend`] serves, in handle order.
-const SIM_FIELDS: [(&str, FieldType); 15] = [
-    ("timestamp", FieldType::Double),
-    ("actual_q", FieldType::Vector6d),
-    ("actual_qd", FieldType::Vector6d),
-    ("target_q", FieldType::Vector6d),
-    ("target_qd", FieldType::Vector6d),
-    ("actual_TCP_pose", FieldType::Vector6d),
-    ("actual_TCP_speed", FieldType::Vector6d),
-    ("speed_scaling", FieldType::Double),
-    ("target_speed_fraction", FieldType::Double),
-    ("robot_mode", FieldType::Int32),
-    ("safety_mode", FieldType::Int32),
-    ("safety_status", FieldType::Int32),
-    ("runtime_state", FieldType::Uint32),
-    ("robot_status_bits", FieldType::Uint32),
-    ("safety_status_bits", FieldType::Uint32),
-];
 
 /// Handle of the constant-zero output registers a SimBackend serves (our program writes none).
 const SIM_ZERO_BASE: usize = 1000;
@@ -287,6 +296,14 @@ pub struct SimBackend {
     watchdog_trips: u64,
     commands_executed: u64,
     remote_control: bool,
+    /// The derived output fields' model (every RTDE guide output field).
+    fields: SimFields,
+    /// The echoed inputs as of the last cycle.
+    io: IoEcho,
+    /// A `.urp` loaded through the dashboard (played as a program that holds the arm).
+    urp: Option<String>,
+    /// Last speed slider fraction applied [-].
+    slider: Option<f64>,
 }
 
 /// A servo command the program executes, and how long it has been in force.
@@ -321,6 +338,10 @@ impl SimBackend {
             watchdog_trips: 0,
             commands_executed: 0,
             remote_control: true,
+            fields: SimFields::default(),
+            io: IoEcho::default(),
+            urp: None,
+            slider: None,
         }
     }
 
@@ -441,18 +462,14 @@ impl SimBackend {
     }
 }
 
-fn joints_value(j: [f64; 6]) -> Value {
-    Value::Vector6d(j)
-}
-
 impl EmulatorBackend for SimBackend {
     fn describe(&self) -> String {
         "simulated ur5e (SimRobot), register protocol".into()
     }
 
     fn output_handle(&mut self, name: &str) -> Option<(OutputHandle, FieldType)> {
-        if let Some(i) = SIM_FIELDS.iter().position(|(n, _)| *n == name) {
-            return SIM_FIELDS.get(i).map(|(_, t)| (OutputHandle(i), *t));
+        if let Some((i, t)) = self.fields.handle(name) {
+            return Some((OutputHandle(i), t));
         }
         if let Some(n) = name
             .strip_prefix("output_int_register_")
@@ -474,41 +491,40 @@ impl EmulatorBackend for SimBackend {
     }
 
     fn read_output(&self, handle: OutputHandle) -> Value {
-        let s = &self.published;
-        match handle.0 {
-            0 => Value::Double(s.timestamp_s),
-            1 => joints_value(s.actual_q),
-            2 => joints_value(s.actual_qd),
-            3 => joints_value(s.target_q),
-            4 => joints_value(s.target_qd),
-            5 => Value::Vector6d(s.actual_tcp_pose),
-            6 => Value::Vector6d(s.actual_tcp_speed),
-            7 => Value::Double(s.speed_scaling),
-            8 => Value::Double(s.target_speed_fraction),
-            9 => Value::Int32(s.robot_mode),
-            10 | 11 => Value::Int32(s.safety_mode),
-            12 => Value::Uint32(s.runtime_state),
-            13 => Value::Uint32(s.robot_status_bits),
-            14 => Value::Uint32(s.safety_status_bits),
-            h if (SIM_OUTPUT_INT_BASE..SIM_OUTPUT_INT_BASE + 48).contains(&h) => {
-                let ours = self
-                    .program
-                    .is_some_and(|m| usize::from(m.int_base) + SIM_OUTPUT_INT_BASE == h);
-                Value::Int32(if ours { self.tick } else { 0 })
-            }
-            h => Value::zero(
-                FieldType::ALL
-                    .get(h.saturating_sub(SIM_ZERO_BASE))
-                    .copied()
-                    .unwrap_or(FieldType::Double),
-            ),
+        if handle.0 < SIM_ZERO_BASE {
+            return self.fields.read(handle.0, &self.published, &self.io);
         }
+        let h = handle.0;
+        if (SIM_OUTPUT_INT_BASE..SIM_OUTPUT_INT_BASE + 48).contains(&h) {
+            let ours = self
+                .program
+                .is_some_and(|m| usize::from(m.int_base) + SIM_OUTPUT_INT_BASE == h);
+            return Value::Int32(if ours { self.tick } else { 0 });
+        }
+        Value::zero(
+            FieldType::ALL
+                .get(handle.0 - SIM_ZERO_BASE)
+                .copied()
+                .unwrap_or(FieldType::Double),
+        )
     }
 
     fn step(&mut self, inputs: &InputRegisters) {
         self.run_program(inputs);
         self.robot.step();
         let _ = self.robot.read_state(&mut self.published);
+        self.io = inputs.io;
+        self.fields.update(&self.published);
+    }
+
+    fn speed_slider(&mut self, fraction: f64) {
+        if self.slider == Some(fraction) {
+            return;
+        }
+        self.slider = Some(fraction);
+        if let Err(e) = self.robot.set_target_speed_fraction(fraction) {
+            tracing::warn!("emulator: speed slider {fraction} refused: {e}");
+        }
     }
 
     fn load_program(&mut self, script: &str) -> bool {
@@ -558,7 +574,7 @@ impl EmulatorBackend for SimBackend {
                 }
             }
             DashboardCommand::Play => {
-                if self.program.is_some() && self.robot.play() {
+                if (self.program.is_some() || self.urp.is_some()) && self.robot.play() {
                     "Starting program".into()
                 } else {
                     failed(cmd)
@@ -593,6 +609,32 @@ impl EmulatorBackend for SimBackend {
             DashboardCommand::IsInRemoteControl => self.remote_control.to_string(),
             DashboardCommand::Quit => "Disconnected".into(),
         }
+    }
+
+    fn runtime_state(&self) -> u32 {
+        self.published.runtime_state
+    }
+
+    fn load_urp(&mut self, path: &str) -> bool {
+        // As on a controller: loading is refused while a program plays.
+        if self.published.runtime_state == crate::types::runtime_state::PLAYING {
+            return false;
+        }
+        self.program = None;
+        self.urp = Some(path.to_owned());
+        true
+    }
+
+    fn loaded_program(&self) -> Option<&str> {
+        self.urp.as_deref()
+    }
+
+    fn restart_safety(&mut self) -> bool {
+        self.robot.clear_protective_stop();
+        self.robot.clear_emergency_stop();
+        self.robot.power_off();
+        self.program = None;
+        true
     }
 
     fn as_any_mut(&mut self) -> &mut dyn Any {
@@ -806,6 +848,12 @@ impl EmulatorBackend for TraceBackend {
         }
     }
 
+    fn runtime_state(&self) -> u32 {
+        self.trace
+            .value(self.row, "runtime_state")
+            .map_or(crate::types::runtime_state::STOPPED, |v| v as u32)
+    }
+
     fn as_any_mut(&mut self) -> &mut dyn Any {
         self
     }
@@ -829,14 +877,45 @@ enum Target {
     Int(usize),
     Double(usize),
     Bit(usize),
-    /// A valid input the emulator accepts and ignores (speed slider, digital outputs, …).
+    /// `*_digital_output_mask` of a group (the bit offset in `actual_digital_output_bits`:
+    /// 0 standard, 8 configurable, 16 tool).
+    DigitalMask(u8),
+    /// `*_digital_output` of a group (as [`Target::DigitalMask`]).
+    DigitalValue(u8),
+    /// `standard_analog_output_mask`.
+    AnalogMask,
+    /// `standard_analog_output_type`.
+    AnalogType,
+    /// `standard_analog_output_0` / `_1` [ratio].
+    AnalogValue(usize),
+    /// `speed_slider_mask`.
+    SliderMask,
+    /// `speed_slider_fraction` [-].
+    SliderFraction,
+    /// `input_bit_registers0_to_31` (0) / `32_to_63` (1).
+    BitsLow(u8),
+    /// A valid input the emulator accepts and ignores (external force/torque).
     Ignored,
+}
+
+/// The mask/value pairs of one input package, applied together after it is decoded.
+#[derive(Debug, Clone, Copy, Default)]
+struct PendingIo {
+    digital_mask: [Option<u8>; 3],
+    digital_value: [Option<u8>; 3],
+    analog_mask: Option<u8>,
+    analog_type: Option<u8>,
+    analog_value: [Option<f64>; 2],
+    slider_mask: Option<u32>,
+    slider_fraction: Option<f64>,
 }
 
 #[derive(Debug)]
 struct Stream {
     session: u64,
     recipe_id: u8,
+    /// Protocol version 1: data packages carry no recipe id.
+    v1: bool,
     sources: Vec<Source>,
     values: Vec<Value>,
     period_cycles: f64,
@@ -860,6 +939,10 @@ struct World {
     /// The clock's bookkeeping (cycles run, late, dropped, paused).
     clock: ClockStats,
     stall_timeout: Duration,
+    /// The controller version (RTDE `v` and the dashboard's `PolyscopeVersion`).
+    version: ControllerVersion,
+    /// The dashboard server's own state.
+    dash: DashboardState,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -909,6 +992,9 @@ impl World {
             );
             if encode_data_package(s.recipe_id, &s.values, &mut pkg).is_err() {
                 continue;
+            }
+            if s.v1 {
+                strip_recipe_id(&mut pkg);
             }
             match s.tx.try_send(pkg) {
                 Ok(()) => s.stalled_since = None,
@@ -978,7 +1064,74 @@ impl World {
                     self.inputs.bits &= !bit;
                 }
             }
+            (Target::BitsLow(half), Value::Uint32(v)) => {
+                let shift = if half == 0 { 0 } else { 32 };
+                let low = &mut self.inputs.io.input_bits_low;
+                *low = (*low & !(0xffff_ffffu64 << shift)) | (u64::from(v) << shift);
+            }
             _ => {}
+        }
+    }
+
+    /// Writes one decoded input package: registers at once, mask/value pairs together (a
+    /// value without its mask in the same package changes nothing, as on a controller).
+    fn write_package(&mut self, targets: &[(Target, FieldType)], values: &[Value]) {
+        let mut p = PendingIo::default();
+        let group = |g: u8| usize::from(g / 8).min(2);
+        for ((t, _), v) in targets.iter().zip(values) {
+            match (*t, *v) {
+                (Target::DigitalMask(g), Value::Uint8(m)) => {
+                    if let Some(x) = p.digital_mask.get_mut(group(g)) {
+                        *x = Some(m);
+                    }
+                }
+                (Target::DigitalValue(g), Value::Uint8(m)) => {
+                    if let Some(x) = p.digital_value.get_mut(group(g)) {
+                        *x = Some(m);
+                    }
+                }
+                (Target::AnalogMask, Value::Uint8(m)) => p.analog_mask = Some(m),
+                (Target::AnalogType, Value::Uint8(m)) => p.analog_type = Some(m),
+                (Target::AnalogValue(i), Value::Double(x)) => {
+                    if let Some(a) = p.analog_value.get_mut(i) {
+                        *a = Some(x);
+                    }
+                }
+                (Target::SliderMask, Value::Uint32(m)) => p.slider_mask = Some(m),
+                (Target::SliderFraction, Value::Double(x)) => p.slider_fraction = Some(x),
+                (t, v) => self.write_input(t, v),
+            }
+        }
+        let io = &mut self.inputs.io;
+        for (g, (m, v)) in p.digital_mask.iter().zip(&p.digital_value).enumerate() {
+            if let (Some(m), Some(v)) = (m, v) {
+                let shift = 8 * g;
+                let (m, v) = (u64::from(*m) << shift, u64::from(*v) << shift);
+                io.digital_outputs = (io.digital_outputs & !m) | (v & m);
+            }
+        }
+        if let Some(mask) = p.analog_mask {
+            for i in 0..2usize {
+                if mask >> i & 1 == 0 {
+                    continue;
+                }
+                if let Some(ty) = p.analog_type {
+                    let bit = 1u8 << i;
+                    io.analog_output_voltage = (io.analog_output_voltage & !bit) | (ty & bit);
+                }
+                if let (Some(x), Some(r)) = (
+                    p.analog_value.get(i).copied().flatten(),
+                    io.analog_output_ratio.get_mut(i),
+                ) {
+                    *r = x.clamp(0.0, 1.0);
+                }
+            }
+        }
+        if let (Some(m), Some(f)) = (p.slider_mask, p.slider_fraction)
+            && m & 1 == 1
+            && (0.0..=1.0).contains(&f)
+        {
+            self.backend.speed_slider(f);
         }
     }
 }
@@ -993,28 +1146,25 @@ fn input_target(name: &str) -> Option<(Target, FieldType)> {
     if let Some(i) = register_index(name, "input_bit_register_").filter(|i| (64..128).contains(i)) {
         return Some((Target::Bit(i), FieldType::Bool));
     }
-    const OTHER_INPUTS: [&str; 13] = [
-        "speed_slider_mask",
-        "speed_slider_fraction",
-        "standard_digital_output_mask",
-        "standard_digital_output",
-        "configurable_digital_output_mask",
-        "configurable_digital_output",
-        "tool_digital_output_mask",
-        "tool_digital_output",
-        "standard_analog_output_mask",
-        "standard_analog_output_type",
-        "standard_analog_output_0",
-        "standard_analog_output_1",
-        "external_force_torque",
-    ];
-    if OTHER_INPUTS.contains(&name)
-        || name == "input_bit_registers0_to_31"
-        || name == "input_bit_registers32_to_63"
-    {
-        return known_field_type(name).map(|t| (Target::Ignored, t));
-    }
-    None
+    let target = match name {
+        "speed_slider_mask" => Target::SliderMask,
+        "speed_slider_fraction" => Target::SliderFraction,
+        "standard_digital_output_mask" => Target::DigitalMask(0),
+        "standard_digital_output" => Target::DigitalValue(0),
+        "configurable_digital_output_mask" => Target::DigitalMask(8),
+        "configurable_digital_output" => Target::DigitalValue(8),
+        "tool_digital_output_mask" => Target::DigitalMask(16),
+        "tool_digital_output" => Target::DigitalValue(16),
+        "standard_analog_output_mask" => Target::AnalogMask,
+        "standard_analog_output_type" => Target::AnalogType,
+        "standard_analog_output_0" => Target::AnalogValue(0),
+        "standard_analog_output_1" => Target::AnalogValue(1),
+        "input_bit_registers0_to_31" => Target::BitsLow(0),
+        "input_bit_registers32_to_63" => Target::BitsLow(1),
+        "external_force_torque" => Target::Ignored,
+        _ => return None,
+    };
+    known_field_type(name).map(|t| (target, t))
 }
 
 /// A running emulator. Dropping it stops every server.
@@ -1085,6 +1235,8 @@ impl Emulator {
             paused: false,
             clock: ClockStats::default(),
             stall_timeout: cfg.stall_timeout,
+            version: cfg.controller_version,
+            dash: DashboardState::default(),
         }));
         let cfg = Arc::new(cfg);
         let programs = Arc::new(AtomicU64::new(0));
@@ -1314,6 +1466,57 @@ async fn read_client_package(
     Ok(())
 }
 
+/// Protocol version 1's output frequency [Hz] (version 1 has no frequency field).
+pub const V1_FREQUENCY_HZ: f64 = 125.0;
+
+/// Removes the recipe id (byte 3) from an encoded package and fixes its size: protocol
+/// version 1's data packages and output setup replies carry none.
+fn strip_recipe_id(pkg: &mut Vec<u8>) {
+    if pkg.len() > 3 {
+        pkg.remove(3);
+        let n = u16::try_from(pkg.len()).unwrap_or(u16::MAX).to_be_bytes();
+        if let Some(size) = pkg.get_mut(..2) {
+            size.copy_from_slice(&n);
+        }
+    }
+}
+
+/// A package sent as protocol version 1 encodes it: output setup request without
+/// frequency, data packages without recipe id. Returns the package rewritten to version 2's
+/// layout (so [`ClientPackage::decode`] reads it), with `last_input` as the recipe id of a
+/// data package.
+fn v1_to_v2(buf: &[u8], last_input: u8) -> Option<Vec<u8>> {
+    let kind = *buf.get(2)?;
+    let payload = buf.get(3..)?;
+    let mut out = vec![0, 0, kind];
+    match kind {
+        crate::codec::kind::SETUP_OUTPUTS => {
+            out.extend_from_slice(&V1_FREQUENCY_HZ.to_be_bytes());
+        }
+        crate::codec::kind::DATA_PACKAGE => out.push(last_input),
+        _ => return None,
+    }
+    out.extend_from_slice(payload);
+    let n = u16::try_from(out.len()).ok()?.to_be_bytes();
+    out.get_mut(..2)?.copy_from_slice(&n);
+    Some(out)
+}
+
+/// Encodes a text message as protocol version 1 does: level, then the message.
+fn v1_text(message: &str, level: u8) -> Vec<u8> {
+    let bytes = message.as_bytes();
+    let body = bytes
+        .get(..bytes.len().min(u16::MAX as usize - 4))
+        .unwrap_or_default();
+    let mut out = Vec::with_capacity(4 + body.len());
+    let n = u16::try_from(4 + body.len()).unwrap_or(u16::MAX);
+    out.extend_from_slice(&n.to_be_bytes());
+    out.push(crate::codec::kind::TEXT_MESSAGE);
+    out.push(level);
+    out.extend_from_slice(body);
+    out
+}
+
 /// The field names of a setup request's comma-separated list. One trailing comma is
 /// ignored, as a controller ignores it: ur_rtde ends every list with one
 /// (`"timestamp,actual_q,"`), and the reply has one type per real name. Any other empty name
@@ -1356,6 +1559,10 @@ async fn rtde_session(
     let mut next_input_recipe: u8 = 1;
     let mut inputs: HashMap<u8, Vec<(Target, FieldType)>> = HashMap::new();
     let mut decoded: Vec<Value> = Vec::new();
+    // The protocol version negotiated (2 until a client asks for 1; both are served, as
+    // UR's guide describes them).
+    let mut version: u16 = PROTOCOL_VERSION;
+    let mut last_input: u8 = 0;
     loop {
         tokio::select! {
             () = kill.notified() => break,
@@ -1366,7 +1573,10 @@ async fn rtde_session(
             () = kill.notified() => break,
             () = running(&mut paused) => {}
         }
-        let pkg = match ClientPackage::decode(&buf) {
+        let v1 = version == 1;
+        let rewritten = if v1 { v1_to_v2(&buf, last_input) } else { None };
+        let bytes: &[u8] = rewritten.as_deref().unwrap_or(&buf);
+        let pkg = match ClientPackage::decode(bytes) {
             Ok(p) => p,
             Err(e) => {
                 tracing::warn!("emulator: rtde client {id} sent a bad package ({e}); closing");
@@ -1374,10 +1584,13 @@ async fn rtde_session(
             }
         };
         let ok = match pkg {
-            ClientPackage::RequestProtocolVersion { version } => reply(
-                &tx,
-                ControllerPackage::ProtocolVersionAccepted(version == PROTOCOL_VERSION),
-            ),
+            ClientPackage::RequestProtocolVersion { version: asked } => {
+                let ok = asked == 1 || asked == PROTOCOL_VERSION;
+                if ok {
+                    version = asked;
+                }
+                reply(&tx, ControllerPackage::ProtocolVersionAccepted(ok))
+            }
             ClientPackage::GetControllerVersion => reply(
                 &tx,
                 ControllerPackage::ControllerVersion(cfg.controller_version),
@@ -1403,11 +1616,16 @@ async fn rtde_session(
                 let recipe_id = if accepted { next_output_recipe } else { 0 };
                 if accepted {
                     next_output_recipe = next_output_recipe.wrapping_add(1).max(1);
-                    w.streams.retain(|s| s.session != id);
+                    // Version 2: every accepted recipe streams (several on one connection);
+                    // version 1 has one output recipe, which a new setup replaces.
+                    if v1 {
+                        w.streams.retain(|s| s.session != id);
+                    }
                     let values = sources.iter().map(|_| Value::Double(0.0)).collect();
                     w.streams.push(Stream {
                         session: id,
                         recipe_id,
+                        v1,
                         sources,
                         values,
                         period_cycles: 1.0 / (frequency_hz * CYCLE_S),
@@ -1419,13 +1637,19 @@ async fn rtde_session(
                 }
                 drop(w);
                 let types = types.join(",");
-                reply(
-                    &tx,
-                    ControllerPackage::SetupOutputsReply {
-                        recipe_id,
-                        types: &types,
-                    },
-                )
+                let mut out = Vec::new();
+                let pkg = ControllerPackage::SetupOutputsReply {
+                    recipe_id,
+                    types: &types,
+                };
+                if pkg.encode(&mut out).is_ok() {
+                    if v1 {
+                        strip_recipe_id(&mut out);
+                    }
+                    tx.try_send(out).is_ok()
+                } else {
+                    false
+                }
             }
             ClientPackage::SetupInputs { names } => {
                 let mut w = lock(&world);
@@ -1455,6 +1679,7 @@ async fn rtde_session(
                         w.owners.insert(name.to_owned(), id);
                     }
                     inputs.insert(recipe_id, targets);
+                    last_input = recipe_id;
                 }
                 drop(w);
                 let types = types.join(",");
@@ -1469,10 +1694,12 @@ async fn rtde_session(
             ClientPackage::Start => {
                 let mut w = lock(&world);
                 let cycle = w.cycle as f64;
-                let has = w.streams.iter().any(|s| s.session == id);
+                let streams = w.streams.iter().any(|s| s.session == id);
+                // A client with only input recipes (ur_rtde's RTDEIOInterface) starts too.
+                let has = streams || !inputs.is_empty();
                 // Reply first, so the client sees it before any data.
                 let ok = reply(&tx, ControllerPackage::StartAccepted(has));
-                if has {
+                if streams {
                     w.backend.stream_started();
                     let msg = w.backend.describe();
                     let cut = msg
@@ -1482,15 +1709,19 @@ async fn rtde_session(
                         .last()
                         .unwrap_or(0);
                     let trimmed = msg.get(..cut).unwrap_or("");
-                    reply(
-                        &tx,
-                        ControllerPackage::Text(TextMessage {
-                            message: trimmed,
-                            source: "emulator",
-                            level: level::INFO,
-                        }),
-                    );
-                    if let Some(s) = w.streams.iter_mut().find(|s| s.session == id) {
+                    if v1 {
+                        let _ = tx.try_send(v1_text(trimmed, level::INFO));
+                    } else {
+                        reply(
+                            &tx,
+                            ControllerPackage::Text(TextMessage {
+                                message: trimmed,
+                                source: "emulator",
+                                level: level::INFO,
+                            }),
+                        );
+                    }
+                    for s in w.streams.iter_mut().filter(|s| s.session == id) {
                         s.streaming = true;
                         s.next_cycle = cycle + 1.0;
                     }
@@ -1499,7 +1730,7 @@ async fn rtde_session(
             }
             ClientPackage::Pause => {
                 let mut w = lock(&world);
-                if let Some(s) = w.streams.iter_mut().find(|s| s.session == id) {
+                for s in w.streams.iter_mut().filter(|s| s.session == id) {
                     s.streaming = false;
                 }
                 reply(&tx, ControllerPackage::PauseAccepted(true))
@@ -1517,10 +1748,7 @@ async fn rtde_session(
                         at += ty.size();
                     }
                     if ok && at == d.payload.len() {
-                        let mut w = lock(&world);
-                        for ((t, _), v) in targets.iter().zip(&decoded) {
-                            w.write_input(*t, *v);
-                        }
+                        lock(&world).write_package(targets, &decoded);
                     } else {
                         tracing::warn!(
                             "emulator: rtde client {id} sent a malformed input package; ignored"
@@ -1598,19 +1826,161 @@ async fn serve_dashboard(
                     }
                     Ok(DashboardLine::Eof) | Err(_) => break,
                 };
-                let cmd = DashboardCommand::parse(&line);
-                let reply = match cmd {
-                    Some(c) => lock(&world).backend.dashboard(c),
-                    None => format!("could not understand: '{}'", line.trim()),
-                };
-                if w.write_all(format!("{reply}\n").as_bytes()).await.is_err()
-                    || cmd == Some(DashboardCommand::Quit)
-                {
+                let (reply, quit) = dashboard_reply(&mut lock(&world), &line);
+                if w.write_all(format!("{reply}\n").as_bytes()).await.is_err() || quit {
                     break;
                 }
             }
         });
     }
+}
+
+/// The dashboard server's state beyond the backend's: what PolyScope keeps per controller.
+#[derive(Debug, Clone, Default)]
+struct DashboardState {
+    /// `setUserRole` (PolyScope 3 command, still answered by PolyScope 5).
+    user_role: Option<String>,
+    /// `set operational mode` (`manual` / `automatic`); `None`: not controlled.
+    operational_mode: Option<String>,
+}
+
+/// The serial number the emulated controller reports (`get serial number`).
+pub const SERIAL_NUMBER: &str = "20235500001";
+
+/// The robot model the emulated controller reports (`get robot model`: a PolyScope 5 UR5e
+/// answers `UR5`).
+pub const ROBOT_MODEL: &str = "UR5";
+
+/// Splits `line` into a command (matched case-insensitively against `name`) and its
+/// argument.
+fn dash_arg<'a>(line: &'a str, name: &str) -> Option<&'a str> {
+    let head = line.get(..name.len())?;
+    if !head.eq_ignore_ascii_case(name) {
+        return None;
+    }
+    let rest = line.get(name.len()..)?;
+    if rest.is_empty() {
+        return Some("");
+    }
+    rest.strip_prefix(' ').map(str::trim)
+}
+
+/// The reply to one dashboard line, in PolyScope 5's wording (UR's dashboard server
+/// documentation, e-Series), and whether the connection ends after it (`quit`).
+fn dashboard_reply(w: &mut World, line: &str) -> (String, bool) {
+    let line = line.trim();
+    if let Some(cmd) = DashboardCommand::parse(line) {
+        return (w.backend.dashboard(cmd), cmd == DashboardCommand::Quit);
+    }
+    let v = w.version;
+    let program_name = |w: &World| {
+        w.backend
+            .loaded_program()
+            .map(|p| p.rsplit('/').next().unwrap_or(p).to_owned())
+    };
+    let lower = line.to_ascii_lowercase();
+    let reply = match lower.as_str() {
+        "polyscopeversion" => format!(
+            "URSoftware {}.{}.{}.{}",
+            v.major, v.minor, v.bugfix, v.build
+        ),
+        "version" => format!("{}.{}.{}.{}", v.major, v.minor, v.bugfix, v.build),
+        "get serial number" => SERIAL_NUMBER.into(),
+        "get robot model" => ROBOT_MODEL.into(),
+        "running" => format!(
+            "Program running: {}",
+            w.backend.runtime_state() == crate::types::runtime_state::PLAYING
+        ),
+        "programstate" => {
+            use crate::types::runtime_state as rs;
+            let state = match w.backend.runtime_state() {
+                rs::PLAYING | rs::RESUMING => "PLAYING",
+                rs::PAUSED | rs::PAUSING => "PAUSED",
+                _ => "STOPPED",
+            };
+            let name = program_name(w).unwrap_or_else(|| "<unnamed>".into());
+            format!("{state} {name}")
+        }
+        "get loaded program" => match w.backend.loaded_program() {
+            Some(p) => format!("Loaded program: {p}"),
+            None => "No program loaded".into(),
+        },
+        "isprogramsaved" => match program_name(w) {
+            // Nothing edits a program on the emulator: a loaded one is saved.
+            Some(name) => format!("True {name}"),
+            None => "False <unnamed>".into(),
+        },
+        "safetymode" => {
+            let status = w.backend.dashboard(DashboardCommand::SafetyStatus);
+            status.replacen("Safetystatus:", "Safetymode:", 1)
+        }
+        "close popup" => "closing popup".into(),
+        "shutdown" => {
+            // The emulator does not exit: the arm powers off, as before a shutdown.
+            w.backend.dashboard(DashboardCommand::PowerOff);
+            "Shutting down".into()
+        }
+        "restart safety" => {
+            if w.backend.restart_safety() {
+                "Restarting safety".into()
+            } else {
+                "Failed to execute: restart safety".into()
+            }
+        }
+        "get operational mode" => w
+            .dash
+            .operational_mode
+            .as_deref()
+            .map_or("NONE".into(), str::to_ascii_uppercase),
+        "clear operational mode" => {
+            let mode = w.dash.operational_mode.take();
+            format!(
+                "No longer controlling the operational mode. Current operational mode: '{}'.",
+                mode.as_deref().unwrap_or("none").to_ascii_uppercase()
+            )
+        }
+        _ => {
+            if let Some(path) = dash_arg(line, "load installation") {
+                format!("Loading installation: {path}")
+            } else if let Some(path) = dash_arg(line, "load") {
+                if path.is_empty() {
+                    "File not found: ".into()
+                } else if w.backend.load_urp(path) {
+                    format!("Loading program: {path}")
+                } else {
+                    format!("Error while loading program: {path}")
+                }
+            } else if let Some(text) = dash_arg(line, "popup") {
+                let _ = text;
+                "showing popup".into()
+            } else if let Some(text) = dash_arg(line, "addToLog") {
+                if text.is_empty() {
+                    "No log message to add".into()
+                } else {
+                    tracing::info!("emulator: dashboard log: {text}");
+                    "Added log message".into()
+                }
+            } else if let Some(role) = dash_arg(line, "setUserRole") {
+                let known = ["programmer", "operator", "none", "locked", "restricted"];
+                if known.iter().any(|r| r.eq_ignore_ascii_case(role)) {
+                    w.dash.user_role = Some(role.to_ascii_lowercase());
+                    format!("Setting user role: {role}")
+                } else {
+                    format!("Failed setting user role: {role}")
+                }
+            } else if let Some(mode) = dash_arg(line, "set operational mode") {
+                if mode.eq_ignore_ascii_case("manual") || mode.eq_ignore_ascii_case("automatic") {
+                    w.dash.operational_mode = Some(mode.to_ascii_lowercase());
+                    format!("Operational mode '{}' is set", mode.to_ascii_lowercase())
+                } else {
+                    format!("Failed to set operational mode: '{mode}'")
+                }
+            } else {
+                format!("could not understand: '{line}'")
+            }
+        }
+    };
+    (reply, false)
 }
 
 /// The longest dashboard command line the emulator reads [bytes], without its line end:
