@@ -347,7 +347,8 @@ pub fn known_field_type(name: &str) -> Option<FieldType> {
         | "payload"
         | "speed_slider_fraction"
         | "standard_analog_output_0"
-        | "standard_analog_output_1" => Double,
+        | "standard_analog_output_1"
+        | "collision_detection_ratio" => Double,
         "target_q"
         | "target_qd"
         | "target_qdd"
@@ -356,6 +357,8 @@ pub fn known_field_type(name: &str) -> Option<FieldType> {
         | "actual_q"
         | "actual_qd"
         | "actual_current"
+        | "actual_current_window"
+        | "actual_current_as_torque"
         | "joint_control_output"
         | "actual_TCP_pose"
         | "actual_TCP_speed"

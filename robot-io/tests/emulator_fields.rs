@@ -255,3 +255,16 @@ async fn several_output_recipes_stream_at_their_own_frequencies() {
     .await
     .expect("test timed out");
 }
+
+/// The codec knows every field the sim backend serves, with the same type, so a trace that
+/// recorded one of them replays it instead of answering NOT_FOUND.
+#[test]
+fn the_codec_knows_every_sim_output_field_with_its_type() {
+    for (name, ty) in robot_io::emulator::sim_fields::SIM_OUTPUT_FIELDS {
+        assert_eq!(
+            robot_io::codec::known_field_type(name),
+            Some(ty),
+            "{name}: the codec's type differs from the sim backend's"
+        );
+    }
+}
