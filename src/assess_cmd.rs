@@ -16,6 +16,8 @@
 //! end, so a failed run leaves no partial results. An existing non-empty `--out` is replaced only
 //! with `--force`.
 
+use crate::Error;
+use crate::error::ResultExt as _;
 use crate::report;
 use crate::vision_cmd::{CameraArgs, CueInput};
 
@@ -24,7 +26,6 @@ use std::fs;
 use std::io::{BufWriter, IsTerminal as _, Write as _};
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context as _, bail};
 use assess::{AssessConfig, Assessment, Assessor, CueFrame, Indicators, Workspace};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -130,7 +131,7 @@ struct Report {
 }
 
 /// Runs `hrc-adapt assess`: assesses the recording and writes the results into `--out`.
-pub fn run(args: AssessArgs) -> anyhow::Result<()> {
+pub fn run(args: AssessArgs) -> crate::Result<()> {
     let report = assess(&args)?;
     print!("{}", report.summary());
     Ok(())
@@ -156,7 +157,7 @@ impl std::fmt::Debug for Run {
 }
 
 impl Run {
-    fn new(workspace: Workspace, cfg: AssessConfig, out: &Path) -> anyhow::Result<Self> {
+    fn new(workspace: Workspace, cfg: AssessConfig, out: &Path) -> crate::Result<Self> {
         // The assessor owns its workspace; the table needs the area names while `update`'s
         // result is borrowed.
         let names = workspace.clone();
@@ -164,10 +165,9 @@ impl Run {
             Assessor::new(workspace, cfg).context("the model configuration is invalid")?;
         let staging = Staging::new(out)?;
         let table_path = staging.path().join(TABLE_FILE);
-        let file = fs::File::create(&table_path)
-            .with_context(|| format!("cannot create {}", table_path.display()))?;
-        let table = IndicatorTable::new(BufWriter::new(file))
-            .with_context(|| format!("cannot write {}", table_path.display()))?;
+        let file = fs::File::create(&table_path).map_err(Error::io("create", &table_path))?;
+        let table =
+            IndicatorTable::new(BufWriter::new(file)).map_err(Error::csv("write", &table_path))?;
         Ok(Self {
             names,
             assessor,
@@ -180,14 +180,14 @@ impl Run {
 
     /// Assesses one frame and writes its row; `None` when the assessor rejected the frame
     /// (time not finite or not increasing).
-    fn push(&mut self, frame: &CueFrame) -> anyhow::Result<Option<&Assessment>> {
+    fn push(&mut self, frame: &CueFrame) -> crate::Result<Option<&Assessment>> {
         let a = self.assessor.update(frame);
         if a.last_rejected {
             return Ok(None);
         }
         self.table
             .write(&self.names, a)
-            .with_context(|| format!("cannot write {}", self.table_path.display()))?;
+            .map_err(Error::csv("write", &self.table_path))?;
         self.samples.push(Sample::of(a));
         Ok(Some(a))
     }
@@ -200,7 +200,7 @@ impl Run {
         cues: String,
         progress: &Progress,
         extra: Vec<PathBuf>,
-    ) -> anyhow::Result<Report> {
+    ) -> crate::Result<Report> {
         let Self {
             assessor,
             staging,
@@ -212,13 +212,16 @@ impl Run {
         table
             .finish()
             .and_then(|mut w| w.flush())
-            .with_context(|| format!("cannot write {}", table_path.display()))?;
+            .map_err(Error::io("write", &table_path))?;
         let last: &Assessment = assessor.assessment();
         if samples.is_empty() {
             if last.frames == 0 {
-                bail!("{cues} holds no frames");
+                return Err(Error::data(cues, "holds no frames"));
             }
-            bail!("every frame of {cues} was rejected (times not finite or not increasing)");
+            return Err(Error::data(
+                cues,
+                "every frame was rejected (times not finite or not increasing)",
+            ));
         }
 
         progress.set_message("plotting");
@@ -231,8 +234,7 @@ impl Run {
         };
         let plots = plot::render(staging.path(), &figure)?;
         let config_path = staging.path().join(CONFIG_FILE);
-        fs::write(&config_path, cfg.to_toml_string()?)
-            .with_context(|| format!("cannot write {}", config_path.display()))?;
+        fs::write(&config_path, cfg.to_toml_string()?).map_err(Error::io("write", &config_path))?;
 
         let mut files = vec![args.out.join(TABLE_FILE)];
         files.extend(
@@ -259,19 +261,22 @@ impl Run {
 }
 
 /// The whole command, without printing.
-fn assess(args: &AssessArgs) -> anyhow::Result<Report> {
+fn assess(args: &AssessArgs) -> crate::Result<Report> {
     check_out(&args.out, args.force)?;
     let input = CueInput::parse(&args.cues)?;
     if !input.is_camera() {
         let given = args.vision.given();
         if !given.is_empty() {
-            bail!(
-                "{} appl{} to camera inputs only (video, image folder, .bag, camera), not to the \
-                 cue file {}",
+            return Err(Error::usage(
                 given.join(", "),
-                if given.len() == 1 { "ies" } else { "y" },
-                args.cues.display()
-            );
+                format!(
+                    "{} appl{} to camera inputs only (video, image folder, .bag, camera), not to \
+                     the cue file {}",
+                    given.join(", "),
+                    if given.len() == 1 { "ies" } else { "y" },
+                    args.cues.display()
+                ),
+            ));
         }
     }
     let mut inputs: Vec<&Path> = vec![args.workspace.as_path()];
@@ -297,7 +302,7 @@ fn assess(args: &AssessArgs) -> anyhow::Result<Report> {
     }
     let frames = read_cues(&input)?;
     if frames.is_empty() {
-        bail!("{} holds no frames", args.cues.display());
+        return Err(Error::data(args.cues.display(), "holds no frames"));
     }
     let mut run = Run::new(workspace, cfg, &args.out)?;
     let progress = progress_bar(Some(frames.len() as u64));
@@ -314,7 +319,7 @@ fn assess_camera(
     input: &CueInput,
     _workspace: Workspace,
     _cfg: AssessConfig,
-) -> anyhow::Result<Report> {
+) -> crate::Result<Report> {
     Err(crate::vision_cmd::vision_missing(input))
 }
 
@@ -325,7 +330,7 @@ fn assess_camera(
     input: &CueInput,
     workspace: Workspace,
     cfg: AssessConfig,
-) -> anyhow::Result<Report> {
+) -> crate::Result<Report> {
     use crate::vision_cmd::{
         ImageSink, LandmarkCsv, Perception, annotate, load_extrinsics, open_source, pipeline_config,
     };
@@ -334,7 +339,10 @@ fn assess_camera(
 
     let v = &args.vision;
     if v.max_frames == Some(0) {
-        bail!("--max-frames must be at least 1");
+        return Err(Error::usage(
+            "--max-frames",
+            "--max-frames must be at least 1",
+        ));
     }
     if let Some(a) = &v.annotate {
         refuse_annotate_onto_inputs(a, &args.out, input)?;
@@ -399,8 +407,7 @@ fn assess_camera(
         }
         landmarks.finish()?;
         let cues_path = run.staging.path().join(CUES_FILE);
-        assess::io::cue_csv::write(&cues_path, &cues)
-            .with_context(|| format!("cannot write {}", cues_path.display()))?;
+        assess::io::cue_csv::write(&cues_path, &cues)?;
         if let Some(sink) = sink {
             sink.finish()?;
         }
@@ -420,28 +427,30 @@ fn assess_camera(
 
 /// `--annotate` must not be `--out` itself nor overwrite an input.
 #[cfg(feature = "vision")]
-fn refuse_annotate_onto_inputs(
-    annotate: &Path,
-    out: &Path,
-    input: &CueInput,
-) -> anyhow::Result<()> {
+fn refuse_annotate_onto_inputs(annotate: &Path, out: &Path, input: &CueInput) -> crate::Result<()> {
     if annotate == out {
-        bail!("--annotate must not be the --out folder itself; give a path inside or beside it");
+        return Err(Error::usage(
+            "--annotate",
+            "--annotate must not be the --out folder itself; give a path inside or beside it",
+        ));
     }
     if let Some(p) = input.path()
         && fs::canonicalize(p).ok() == fs::canonicalize(annotate).ok()
         && annotate.exists()
     {
-        bail!(
-            "--annotate {} is the input; choose another path",
-            annotate.display()
-        );
+        return Err(Error::usage(
+            "--annotate",
+            format!(
+                "--annotate {} is the input; choose another path",
+                annotate.display()
+            ),
+        ));
     }
     Ok(())
 }
 
 /// A cue CSV file, or a KTH handover folder.
-fn read_cues(input: &CueInput) -> anyhow::Result<Vec<CueFrame>> {
+fn read_cues(input: &CueInput) -> crate::Result<Vec<CueFrame>> {
     match input {
         CueInput::Kth(path) => Ok(assess::io::kth::read_taker(
             path,
@@ -449,7 +458,9 @@ fn read_cues(input: &CueInput) -> anyhow::Result<Vec<CueFrame>> {
         )?),
         // The error already names the file, line and column.
         CueInput::CueCsv(path) => Ok(assess::io::cue_csv::read(path)?),
-        other => bail!("internal: {other:?} is not a cue file"),
+        other => Err(Error::Internal {
+            reason: format!("{other:?} is not a cue file"),
+        }),
     }
 }
 
@@ -494,26 +505,31 @@ fn progress_bar(len: Option<u64>) -> Progress {
 }
 
 /// Refuses an `--out` that is a file, or a non-empty folder without `--force`.
-fn check_out(out: &Path, force: bool) -> anyhow::Result<()> {
+fn check_out(out: &Path, force: bool) -> crate::Result<()> {
     match fs::metadata(out) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => {
-            Err(e).with_context(|| format!("cannot inspect the output folder {}", out.display()))
-        }
-        Ok(m) if !m.is_dir() => bail!(
-            "--out {} exists and is not a folder; choose another path",
-            out.display()
-        ),
+        Err(e) => Err(Error::io("inspect the output folder", out)(e)),
+        Ok(m) if !m.is_dir() => Err(Error::usage(
+            "--out",
+            format!(
+                "--out {} exists and is not a folder; choose another path",
+                out.display()
+            ),
+        )),
         Ok(_) => {
             let non_empty = fs::read_dir(out)
-                .with_context(|| format!("cannot list the output folder {}", out.display()))?
+                .map_err(Error::io("list the output folder", out))?
                 .next()
                 .is_some();
             if non_empty && !force {
-                bail!(
-                    "the output folder {} exists and is not empty; pass --force to replace it, or choose another --out",
-                    out.display()
-                );
+                return Err(Error::usage(
+                    "--out",
+                    format!(
+                        "the output folder {} exists and is not empty; pass --force to replace \
+                         it, or choose another --out",
+                        out.display()
+                    ),
+                ));
             }
             Ok(())
         }
@@ -521,17 +537,20 @@ fn check_out(out: &Path, force: bool) -> anyhow::Result<()> {
 }
 
 /// `--force` must never delete the inputs: refuses an `--out` that contains one of them.
-fn refuse_inputs_inside(out: &Path, inputs: &[&Path]) -> anyhow::Result<()> {
+fn refuse_inputs_inside(out: &Path, inputs: &[&Path]) -> crate::Result<()> {
     let Ok(out_abs) = fs::canonicalize(out) else {
         return Ok(()); // `out` does not exist yet, so it holds nothing.
     };
     for input in inputs {
         if fs::canonicalize(input).is_ok_and(|abs| abs.starts_with(&out_abs)) {
-            bail!(
-                "the output folder {} contains the input {}; choose another --out",
-                out.display(),
-                input.display()
-            );
+            return Err(Error::usage(
+                "--out",
+                format!(
+                    "the output folder {} contains the input {}; choose another --out",
+                    out.display(),
+                    input.display()
+                ),
+            ));
         }
     }
     Ok(())
@@ -546,13 +565,12 @@ struct Staging {
 
 impl Staging {
     /// Creates `.<out name>.partial-<pid>[-n]` in the parent of `out` (created if needed).
-    fn new(out: &Path) -> anyhow::Result<Self> {
+    fn new(out: &Path) -> crate::Result<Self> {
         let path = sibling(out, "partial")?;
         if let Some(parent) = path.parent() {
-            fs::create_dir_all(parent)
-                .with_context(|| format!("cannot create {}", parent.display()))?;
+            fs::create_dir_all(parent).map_err(Error::io("create", parent))?;
         }
-        fs::create_dir(&path).with_context(|| format!("cannot create {}", path.display()))?;
+        fs::create_dir(&path).map_err(Error::io("create", &path))?;
         Ok(Self {
             path,
             installed: false,
@@ -565,28 +583,22 @@ impl Staging {
 
     /// Renames the staged folder to `out`. An existing `out` (checked again: empty, or `force`)
     /// is moved aside first and deleted only once the new folder is in place.
-    fn install(mut self, out: &Path, force: bool) -> anyhow::Result<()> {
+    fn install(mut self, out: &Path, force: bool) -> crate::Result<()> {
         check_out(out, force)?;
         if fs::symlink_metadata(out).is_ok() {
             let old = sibling(out, "old")?;
-            fs::rename(out, &old)
-                .with_context(|| format!("cannot move the old {} aside", out.display()))?;
+            fs::rename(out, &old).map_err(Error::io("move aside the old", out))?;
             if let Err(e) = fs::rename(&self.path, out) {
                 let _ = fs::rename(&old, out);
-                return Err(e)
-                    .with_context(|| format!("cannot move the results into {}", out.display()));
+                return Err(Error::io("move the results into", out)(e));
             }
             self.installed = true;
-            fs::remove_dir_all(&old).with_context(|| {
-                format!(
-                    "the results are in {}, but the old folder {} could not be removed",
-                    out.display(),
-                    old.display()
-                )
+            fs::remove_dir_all(&old).map_err(|e| {
+                Error::io("remove the old folder", &old)(e)
+                    .context(format!("the results are in {}", out.display()))
             })?;
         } else {
-            fs::rename(&self.path, out)
-                .with_context(|| format!("cannot move the results into {}", out.display()))?;
+            fs::rename(&self.path, out).map_err(Error::io("move the results into", out))?;
             self.installed = true;
         }
         Ok(())
@@ -602,9 +614,12 @@ impl Drop for Staging {
 }
 
 /// A path next to `out` that does not exist yet: `.<name>.<tag>-<pid>[-n]`.
-fn sibling(out: &Path, tag: &str) -> anyhow::Result<PathBuf> {
+fn sibling(out: &Path, tag: &str) -> crate::Result<PathBuf> {
     let Some(name) = out.file_name() else {
-        bail!("--out {} must name a folder", out.display());
+        return Err(Error::usage(
+            "--out",
+            format!("--out {} must name a folder", out.display()),
+        ));
     };
     let parent = match out.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
@@ -1036,7 +1051,7 @@ mod vision_tests {
 
     /// The error of a run that must fail, with its causes.
     fn fails(a: &AssessArgs) -> String {
-        format!("{:#}", assess(a).unwrap_err())
+        assess(a).unwrap_err().with_causes().to_string()
     }
 
     fn still() -> VisionArgs {

@@ -19,7 +19,6 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context as _, bail};
 use assess::Workspace;
 use assess::vision::calib::{self, BoardCalibration, BoardSpec, CalibrationInfo, ExtrinsicsFile};
 use assess::vision::source::capture::DEFAULT_HFOV_DEG;
@@ -27,6 +26,8 @@ use assess::vision::source::folder;
 use assess::vision::{Intrinsics, RgbImage};
 use clap::Args;
 
+use crate::Error;
+use crate::error::ResultExt as _;
 use crate::vision_cmd::{
     CameraArgs, CueInput, FixedIntrinsics, IntrinsicsArg, open_source, parse_hfov, parse_intrinsics,
 };
@@ -94,7 +95,7 @@ struct Outcome {
 }
 
 /// Runs `hrc-adapt calibrate`: prints the board, or writes the extrinsics file.
-pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
+pub fn run(args: CalibrateArgs) -> crate::Result<()> {
     let board = BoardSpec::from_toml_file(&args.board)
         .with_context(|| format!("loading the board {}", args.board.display()))?;
     if let Some(png) = &args.print_board {
@@ -108,7 +109,7 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn print_board(board: &BoardSpec, png: &Path, dpi: f64) -> anyhow::Result<String> {
+fn print_board(board: &BoardSpec, png: &Path, dpi: f64) -> crate::Result<String> {
     let print = calib::write_board_png(board, png, dpi, PRINT_MARGIN_M)
         .with_context(|| format!("writing the board to {}", png.display()))?;
     let (w, h) = print.paper_m;
@@ -139,12 +140,23 @@ fn print_board(board: &BoardSpec, png: &Path, dpi: f64) -> anyhow::Result<String
     ))
 }
 
-fn calibrate(args: &CalibrateArgs, board: &BoardSpec) -> anyhow::Result<Outcome> {
+/// The usage error of a `calibrate` without an image, a camera or `--print-board`.
+fn nothing_to_do() -> Error {
+    Error::usage(
+        "--image, --camera, --print-board",
+        "nothing to do: pass --image, --camera or --print-board",
+    )
+}
+
+fn calibrate(args: &CalibrateArgs, board: &BoardSpec) -> crate::Result<Outcome> {
     if args.image.is_none() && args.camera.is_none() {
-        bail!("nothing to do: pass --image, --camera or --print-board");
+        return Err(nothing_to_do());
     }
     if args.out.exists() && !args.force {
-        bail!("{} exists; pass --force to replace it", args.out.display());
+        return Err(Error::usage(
+            "--out",
+            format!("{} exists; pass --force to replace it", args.out.display()),
+        ));
     }
     let workspace = args
         .workspace
@@ -169,8 +181,13 @@ fn calibrate(args: &CalibrateArgs, board: &BoardSpec) -> anyhow::Result<Outcome>
             )
         }
         (None, Some(spec)) => grab_frames(args, spec)?,
-        (Some(_), Some(_)) => bail!("pass either --image or --camera, not both"),
-        (None, None) => bail!("nothing to do: pass --image, --camera or --print-board"),
+        (Some(_), Some(_)) => {
+            return Err(Error::usage(
+                "--image, --camera",
+                "pass either --image or --camera, not both",
+            ));
+        }
+        (None, None) => return Err(nothing_to_do()),
     };
     let tried = frames.len();
     let mut results = Vec::new();
@@ -195,7 +212,10 @@ fn calibrate(args: &CalibrateArgs, board: &BoardSpec) -> anyhow::Result<Outcome>
         .map(|(i, _)| i);
     let Some(best) = best else {
         let err = last_err.map_or_else(|| "no frame".to_string(), |e| e.to_string());
-        bail!("calibration failed on all {tried} frame(s) from {source}: {err}");
+        return Err(Error::data(
+            source,
+            format!("calibration failed on all {tried} frame(s): {err}"),
+        ));
     };
     let spread_m = results
         .iter()
@@ -248,14 +268,17 @@ fn calibrate(args: &CalibrateArgs, board: &BoardSpec) -> anyhow::Result<Outcome>
 
 type Frames = (String, Vec<(RgbImage, Intrinsics, bool)>);
 
-fn grab_frames(args: &CalibrateArgs, spec: &Path) -> anyhow::Result<Frames> {
+fn grab_frames(args: &CalibrateArgs, spec: &Path) -> crate::Result<Frames> {
     let input = CueInput::parse_flag(spec, "--camera")?;
     if !input.is_camera() {
-        bail!(
-            "--camera {}: a cue file or KTH folder holds no images; expected a video, an image \
-             folder, a RealSense .bag, `camera` or `webcam:N[:WxH]`",
-            spec.display()
-        );
+        return Err(Error::usage(
+            "--camera",
+            format!(
+                "--camera {}: a cue file or KTH folder holds no images; expected a video, an \
+                 image folder, a RealSense .bag, `camera` or `webcam:N[:WxH]`",
+                spec.display()
+            ),
+        ));
     }
     let cam = CameraArgs {
         hfov: args.hfov_deg,
@@ -287,11 +310,10 @@ fn grab_frames(args: &CalibrateArgs, spec: &Path) -> anyhow::Result<Frames> {
         frames.push((frame.color, k, guessed));
     }
     if frames.is_empty() {
-        bail!(
-            "{} gave no frame after skipping {} (see --skip)",
-            src.describe(),
-            args.skip
-        );
+        return Err(Error::Camera {
+            camera: src.describe(),
+            reason: format!("gave no frame after skipping {} (see --skip)", args.skip),
+        });
     }
     Ok((src.describe(), frames))
 }
@@ -480,7 +502,7 @@ mod tests {
         let fails = |a: &CalibrateArgs| {
             let e = calibrate(a, &BoardSpec::default()).expect_err("must fail");
             assert!(!a.out.exists());
-            format!("{e:#}")
+            e.with_causes().to_string()
         };
         let path = dir.path().join("blank.png");
         calib::write_png(&RgbImage::black(320, 240), &path).expect("png");

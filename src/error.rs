@@ -1,9 +1,9 @@
 //! The library's error type: one enum, [`Error`], with structured fields.
 //!
 //! Each variant's message says what failed at its own level and names the file, field or
-//! argument; the cause is its [`source`](std::error::Error::source), so the binary (anyhow)
-//! prints the whole chain, one cause per line. [`Error::with_causes`] writes the chain on one
-//! line (`a: b: c`, as anyhow's `{:#}` does), for logs and `summary.json`.
+//! argument; the cause is its [`source`](std::error::Error::source), so the binary prints the
+//! whole chain, one cause per line. [`Error::with_causes`] writes the chain on one
+//! line (`a: b: c`), for logs, reports and tests.
 //!
 //! A trial that did not end normally is [`Error::Trial`]: its [`TrialEnded`] carries the
 //! `finish_reason` and the run folder, and [`Error::exit_code`] maps it onto the process exit
@@ -22,13 +22,13 @@ pub enum Error {
     #[error("{reason}")]
     Usage {
         /// The argument(s) at fault (`--jobs`, `--image, --camera`).
-        arg: &'static str,
+        arg: String,
         /// The whole message, naming the argument(s) and what to pass instead.
         reason: String,
     },
     /// A configuration value breaks a rule (the file, if known, is an [`Error::InFile`]
     /// around it).
-    #[error("{field} {reason}")]
+    #[error("`{field}` {reason}")]
     Config {
         /// The key, dotted (`link.lost_after_s`).
         field: String,
@@ -54,11 +54,21 @@ pub enum Error {
         /// The cause.
         source: std::io::Error,
     },
-    /// A TOML document could not be parsed.
-    #[error("cannot parse {}", path.display())]
-    Toml {
-        /// The file (`<string>` for an in-memory document).
+    /// The file or folder a command-line argument names cannot be read.
+    #[error("cannot read {arg} {}", path.display())]
+    Input {
+        /// The argument (`--cues`).
+        arg: String,
+        /// The file or folder.
         path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// A TOML document could not be parsed.
+    #[error("cannot parse {what}")]
+    Toml {
+        /// The document (a file, or what it configures).
+        what: String,
         /// The parser's error, with line and column.
         source: toml::de::Error,
     },
@@ -100,10 +110,26 @@ pub enum Error {
         /// The plotting library's message.
         reason: String,
     },
-    /// A thread could not be started.
-    #[error("cannot start the {name} thread")]
+    /// A camera (or another frame source) cannot serve the command.
+    #[error("{camera} {reason}")]
+    Camera {
+        /// The camera as the user named it, or as it describes itself.
+        camera: String,
+        /// What is wrong (follows the camera's name), and what to do about it.
+        reason: String,
+    },
+    /// The console (stdin, stdout) of a guided session could not be read or written.
+    #[error("cannot {action} the console")]
+    Console {
+        /// What was being done (`read an answer from`, `write a prompt to`).
+        action: &'static str,
+        /// The cause (a Ctrl-C at a prompt is in here: `trial::prompt::is_interrupted`).
+        source: std::io::Error,
+    },
+    /// A thread (or the tokio runtime's threads) could not be started.
+    #[error("cannot start the {name}")]
     Thread {
-        /// The thread's name.
+        /// The thread (`perception thread`, `tokio runtime`).
         name: &'static str,
         /// The cause.
         source: std::io::Error,
@@ -115,6 +141,76 @@ pub enum Error {
         what: &'static str,
         /// The panic message.
         message: String,
+    },
+    /// Ctrl-C (the stop flag) ended a prompt before its answer came.
+    #[error("interrupted (Ctrl-C) at {at}; nothing moved")]
+    Interrupted {
+        /// The prompt (`the confirmation prompt`).
+        at: &'static str,
+    },
+    /// The robot's operator did not confirm the start with `yes`.
+    #[error("not confirmed ({answer:?} is not `yes`); nothing moved")]
+    NotConfirmed {
+        /// The answer given, trimmed.
+        answer: String,
+    },
+    /// The robot is not in a state a trial can start from (no remote control, the safety
+    /// status, the control program not playing).
+    #[error("the robot at {host}: {reason}")]
+    RobotNotReady {
+        /// The robot's address.
+        host: String,
+        /// What is wrong, and what to do about it.
+        reason: String,
+    },
+    /// Why a trial ended abnormally without an error (`link_lost`, `task_impossible`, ...), as
+    /// the runtime saw it: the cause of its [`Error::Trial`].
+    #[error("{why}")]
+    Ending {
+        /// What happened (`no new robot state for 1.0 s`), or the reason alone.
+        why: String,
+    },
+    /// The control thread's log ring overflowed: the trial's logs miss records.
+    #[error(
+        "{dropped} control-rate log records were lost (the log ring was full); the logs in {} \
+         are incomplete",
+        dir.display()
+    )]
+    LogIncomplete {
+        /// Records lost.
+        dropped: u64,
+        /// The run folder.
+        dir: PathBuf,
+    },
+    /// An experiment ran, and wrote its report, but some of its trials failed.
+    #[error(
+        "{failed} of {trials} trials failed (each error is in {}); the trial logs are in {}",
+        report.display(),
+        dir.display()
+    )]
+    ExperimentFailed {
+        /// Trials that failed.
+        failed: usize,
+        /// Trials run.
+        trials: usize,
+        /// `experiment_report.html`, which holds each error.
+        report: PathBuf,
+        /// The experiment folder.
+        dir: PathBuf,
+    },
+    /// A guided session ended, but some of its trials failed.
+    #[error(
+        "{failed} of {trials} trials of the session failed; their logs and everything entered \
+         are in {}",
+        dir.display()
+    )]
+    SessionFailed {
+        /// Trials that failed.
+        failed: usize,
+        /// Trials of the session.
+        trials: usize,
+        /// The session folder.
+        dir: PathBuf,
     },
     /// The `assess` crate failed (configuration, cue files, the camera front-end).
     #[error(transparent)]
@@ -150,6 +246,12 @@ pub enum Error {
     /// ([`Error::exit_code`]).
     #[error(transparent)]
     Trial(Box<TrialEnded>),
+    /// A bug: something the code relies on did not hold.
+    #[error("internal: {reason}")]
+    Internal {
+        /// What did not hold.
+        reason: String,
+    },
     /// An error inside a file: the file, then the error.
     #[error("in {}", path.display())]
     InFile {
@@ -168,14 +270,24 @@ pub enum Error {
     },
 }
 
+/// Returns `Err($err.into())` from the enclosing function unless `$cond` holds (the library's
+/// `ensure!`: the error is an [`Error`] built by the caller, not a message).
+macro_rules! ensure {
+    ($cond:expr, $err:expr $(,)?) => {
+        if !$cond {
+            return Err($err.into());
+        }
+    };
+}
+
 /// Result alias of this library.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
     /// A [`Error::Usage`] for `arg`, with the whole message `reason`.
-    pub(crate) fn usage(arg: &'static str, reason: impl Into<String>) -> Self {
+    pub(crate) fn usage(arg: impl Into<String>, reason: impl Into<String>) -> Self {
         Self::Usage {
-            arg,
+            arg: arg.into(),
             reason: reason.into(),
         }
     }
@@ -239,10 +351,10 @@ impl Error {
         }
     }
 
-    /// The [`Error::Toml`] of parsing `path`, for `map_err`.
-    pub(crate) fn toml(path: &Path) -> impl FnOnce(toml::de::Error) -> Self {
-        let path = path.to_path_buf();
-        move |source| Self::Toml { path, source }
+    /// The [`Error::Toml`] of parsing `what`, for `map_err`.
+    pub(crate) fn toml(what: impl std::fmt::Display) -> impl FnOnce(toml::de::Error) -> Self {
+        let what = what.to_string();
+        move |source| Self::Toml { what, source }
     }
 
     /// A [`Error::Panic`] of `what` from the payload of a caught panic.
@@ -287,8 +399,7 @@ impl Error {
         self.trial_ended().map_or(1, TrialEnded::exit_code)
     }
 
-    /// The error and its causes on one line, `error: cause: cause` (what anyhow's `{:#}`
-    /// writes).
+    /// The error and its causes on one line, `error: cause: cause`.
     pub fn with_causes(&self) -> WithCauses<'_> {
         WithCauses(self)
     }
@@ -389,7 +500,7 @@ mod tests {
         assert_eq!(e.exit_code(), 1);
         let ended = Error::from(TrialEnded::before_start(
             crate::trial::runtime::reason::INTERRUPTED,
-            Error::usage("--x", "not confirmed").into(),
+            Error::usage("--x", "not confirmed"),
         ));
         assert_eq!(ended.exit_code(), 130);
         let wrapped = ended.context("participant P01, trial 3");

@@ -28,11 +28,12 @@ use std::io::IsTerminal as _;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, mpsc};
 
-use anyhow::Context as _;
 use clap::Args;
 use policies::{Condition, ExperimentDesign, PolicyKind, Schedule, SplitMix64};
 use serde::Deserialize;
 
+use crate::Error;
+use crate::error::ResultExt as _;
 use crate::trial::config::TrialConfig;
 use crate::trial::{CueSource, TrialSpec, run_simulated};
 
@@ -91,24 +92,28 @@ pub(crate) struct ExperimentConfig {
 
 impl ExperimentConfig {
     /// Reads and checks an experiment file; `trial_config` becomes relative to the process.
-    pub(crate) fn from_file(path: &Path) -> anyhow::Result<ExperimentConfig> {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    pub(crate) fn from_file(path: &Path) -> crate::Result<ExperimentConfig> {
+        let text = std::fs::read_to_string(path).map_err(Error::io("read", path))?;
         let mut cfg: ExperimentConfig =
-            toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+            toml::from_str(&text).map_err(Error::toml(path.display()))?;
         cfg.trial_config = path
             .parent()
             .unwrap_or(Path::new("."))
             .join(&cfg.trial_config);
-        anyhow::ensure!(
+        ensure!(
             cfg.policies.len() == 2,
-            "{}: `policies` must name exactly two policies (treatment, baseline), got {}",
-            path.display(),
-            cfg.policies.len()
+            Error::config(
+                "policies",
+                format!(
+                    "must name exactly two policies (treatment, baseline), got {}",
+                    cfg.policies.len()
+                )
+            )
+            .in_file(path)
         );
         for p in &cfg.policies {
             p.parse::<PolicyKind>()
-                .with_context(|| format!("{}: policies", path.display()))?;
+                .map_err(|e| Error::from(e).context("`policies`").in_file(path))?;
         }
         Ok(cfg)
     }
@@ -164,7 +169,7 @@ pub(crate) struct TrialRun {
 }
 
 /// Every trial of `schedule`, session by session in running order.
-pub(crate) fn plan(schedule: &Schedule, seed: u64) -> anyhow::Result<Vec<Vec<PlannedTrial>>> {
+pub(crate) fn plan(schedule: &Schedule, seed: u64) -> crate::Result<Vec<Vec<PlannedTrial>>> {
     schedule
         .sessions
         .iter()
@@ -194,9 +199,8 @@ pub(crate) fn plan(schedule: &Schedule, seed: u64) -> anyhow::Result<Vec<Vec<Pla
 }
 
 /// Writes `schedule.csv`: one row per trial, session by session in running order.
-pub(crate) fn write_schedule(path: &Path, sessions: &[Vec<PlannedTrial>]) -> anyhow::Result<()> {
-    let mut w =
-        csv::Writer::from_path(path).with_context(|| format!("creating {}", path.display()))?;
+pub(crate) fn write_schedule(path: &Path, sessions: &[Vec<PlannedTrial>]) -> crate::Result<()> {
+    let mut w = csv::Writer::from_path(path).map_err(Error::csv("create", path))?;
     w.write_record([
         "participant",
         "position",
@@ -205,7 +209,8 @@ pub(crate) fn write_schedule(path: &Path, sessions: &[Vec<PlannedTrial>]) -> any
         "square_row",
         "seed",
         "folder",
-    ])?;
+    ])
+    .map_err(Error::csv("write", path))?;
     for t in sessions.iter().flatten() {
         w.write_record([
             t.participant.clone(),
@@ -215,9 +220,10 @@ pub(crate) fn write_schedule(path: &Path, sessions: &[Vec<PlannedTrial>]) -> any
             t.square_row.to_string(),
             t.seed.to_string(),
             t.folder.clone(),
-        ])?;
+        ])
+        .map_err(Error::csv("write", path))?;
     }
-    w.flush()?;
+    w.flush().map_err(Error::io("write", path))?;
     Ok(())
 }
 
@@ -287,7 +293,7 @@ fn run_one(trial: PlannedTrial, trial_config: &TrialConfig, dir: &Path) -> Trial
     }));
     let error = match result {
         Ok(Ok(_)) => None,
-        Ok(Err(e)) => Some(format!("{e:#}")),
+        Ok(Err(e)) => Some(e.with_causes().to_string()),
         Err(panic) => Some(format!(
             "panicked: {}",
             panic
@@ -305,14 +311,17 @@ fn run_one(trial: PlannedTrial, trial_config: &TrialConfig, dir: &Path) -> Trial
 }
 
 /// Runs `hrc-adapt experiment`.
-pub fn run(args: ExperimentArgs) -> anyhow::Result<()> {
+pub fn run(args: ExperimentArgs) -> crate::Result<()> {
     if let Some(participant) = &args.participant {
         return run_real_session(&args, participant);
     }
     let jobs = args.jobs.unwrap_or_else(|| {
         std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
     });
-    anyhow::ensure!(jobs >= 1, "--jobs must be at least 1");
+    ensure!(
+        jobs >= 1,
+        Error::usage("--jobs", "--jobs must be at least 1")
+    );
     let wanted = args
         .out_root
         .join(format!("{}-experiment", crate::trial::wall_stamp()));
@@ -324,13 +333,14 @@ pub fn run(args: ExperimentArgs) -> anyhow::Result<()> {
     );
     println!("{}", out.report.display());
     // Everything that could be written is; a failed trial still fails the command.
-    anyhow::ensure!(
+    ensure!(
         out.failed == 0,
-        "{} of {} trials failed (each error is in {}); the trial logs are in {}",
-        out.failed,
-        out.trials,
-        out.report.display(),
-        out.dir.display()
+        Error::ExperimentFailed {
+            failed: out.failed,
+            trials: out.trials,
+            report: out.report,
+            dir: out.dir,
+        }
     );
     Ok(())
 }
@@ -339,7 +349,7 @@ pub fn run(args: ExperimentArgs) -> anyhow::Result<()> {
 pub(crate) fn participant_trials(
     cfg: &ExperimentConfig,
     participant: &str,
-) -> anyhow::Result<Vec<PlannedTrial>> {
+) -> crate::Result<Vec<PlannedTrial>> {
     let schedule = cfg.design().schedule().context("invalid design")?;
     let sessions = plan(&schedule, cfg.seed)?;
     let known: Vec<&str> = schedule
@@ -350,27 +360,33 @@ pub(crate) fn participant_trials(
     sessions
         .into_iter()
         .find(|s| s.first().is_some_and(|t| t.participant == participant))
-        .with_context(|| {
-            format!(
-                "participant {participant} is not in the schedule ({})",
-                known.join(", ")
+        .ok_or_else(|| {
+            Error::usage(
+                "--participant",
+                format!(
+                    "participant {participant} is not in the schedule ({})",
+                    known.join(", ")
+                ),
             )
         })
 }
 
 /// `hrc-adapt experiment --participant P03 --robot …`: the guided real session of one
 /// participant into `<out-root>/<timestamp>-session-P03/` ([`session`]).
-fn run_real_session(args: &ExperimentArgs, participant: &str) -> anyhow::Result<()> {
+fn run_real_session(args: &ExperimentArgs, participant: &str) -> crate::Result<()> {
     use crate::trial::runtime;
     let cfg = ExperimentConfig::from_file(&args.config)?;
     let trial_config = TrialConfig::from_file(&cfg.trial_config)?;
-    let trials = participant_trials(&cfg, participant)
-        .with_context(|| format!("{}", args.config.display()))?;
+    let trials = participant_trials(&cfg, participant).map_err(|e| e.in_file(&args.config))?;
     let robot_name = args.robot.clone().unwrap_or_else(|| "emulator".into());
     let cues = crate::trial::cue_source(args.cues.as_deref(), &args.camera, None)?;
-    anyhow::ensure!(
+    ensure!(
         matches!(cues, CueSource::Simulated | CueSource::Camera(_)),
-        "--cues in a session takes `camera` or `webcam:N` (a live camera), not a recorded file"
+        Error::usage(
+            "--cues",
+            "--cues in a session takes `camera` or `webcam:N` (a live camera), not a recorded \
+             file"
+        )
     );
     let live = matches!(cues, CueSource::Camera(_));
     let robot = crate::trial::robot_choice(&robot_name, args.speedup, live)?;
@@ -392,7 +408,7 @@ fn run_real_session(args: &ExperimentArgs, participant: &str) -> anyhow::Result<
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
     crate::trial::install_ctrl_c(stop.clone());
     let show = std::io::stderr().is_terminal();
-    let mut run_trial = |t: &PlannedTrial, out: &Path| -> anyhow::Result<PathBuf> {
+    let mut run_trial = |t: &PlannedTrial, out: &Path| -> crate::Result<PathBuf> {
         stop.store(false, std::sync::atomic::Ordering::Relaxed);
         let spec = TrialSpec {
             participant: t.participant.clone(),
@@ -449,12 +465,13 @@ fn run_real_session(args: &ExperimentArgs, participant: &str) -> anyhow::Result<
         .iter()
         .filter(|(_, o)| matches!(o, session::StepOutcome::Failed(_)))
         .count();
-    anyhow::ensure!(
+    ensure!(
         failed == 0,
-        "{failed} of {} trials of the session failed; their logs and everything entered are \
-         in {}",
-        trials.len(),
-        dir.display()
+        Error::SessionFailed {
+            failed,
+            trials: trials.len(),
+            dir,
+        }
     );
     Ok(())
 }
@@ -481,14 +498,15 @@ pub(crate) fn run_experiment(
     wanted: &Path,
     jobs: usize,
     show_progress: bool,
-) -> anyhow::Result<ExperimentOutcome> {
+) -> crate::Result<ExperimentOutcome> {
     let started = std::time::Instant::now();
     let cfg = ExperimentConfig::from_file(config_path)?;
     let trial_config = TrialConfig::from_file(&cfg.trial_config)?;
-    let schedule = cfg
-        .design()
-        .schedule()
-        .with_context(|| format!("{}: invalid design", config_path.display()))?;
+    let schedule = cfg.design().schedule().map_err(|e| {
+        Error::from(e)
+            .context("invalid design")
+            .in_file(config_path)
+    })?;
     let sessions = plan(&schedule, cfg.seed)?;
     // Never an existing folder: experiments are not mixed.
     let dir = crate::trial::create_run_dir(wanted)?;

@@ -23,21 +23,40 @@
 //!   operator ([`trial::operator`]), the configuration ([`trial::config`]), the logs and the
 //!   report; [`trial::run_simulated`] runs one trial on the simulated robot.
 //! - [`experiment`]: policy A/B experiments (`hrc-adapt experiment`) and the guided session.
-//! - [`stats`]: the experiments' statistics (Wilcoxon, Friedman, Holm, Spearman, NASA-TLX).
-//! - [`report`]: the indicator table and plots of `hrc-adapt assess`.
-//! - [`assess_cmd`], [`vision_cmd`], `calibrate_cmd` (feature `vision`): offline assessment,
-//!   the camera front-end (landmarks → cues) and the camera calibration.
+//!   Its statistics are the crate-private `stats` (Wilcoxon, Friedman, Holm, Spearman, NASA-TLX).
+//! - [`assess_cmd`] (offline assessment, with its indicator table and plots in the
+//!   crate-private `report`), `calibrate_cmd` (feature `vision`: the camera calibration), and
+//!   the crate-private `vision_cmd`, the camera front-end (landmarks → cues) of both and of
+//!   live trials.
 //! - [`robot_cmd`]: `hrc-adapt record` (an RTDE trace) and `hrc-adapt emulate`.
 //! - [`Error`]: the library's one error type; a trial that did not end normally is
 //!   [`Error::Trial`], whose [`Error::exit_code`] is the process exit code (README, "Exit
 //!   codes").
 //!
-//! # Example
+//! # Examples
 //!
-//! One simulated trial of 1 s (trial time, on the mock clock) with the shipped configuration,
-//! into a new folder; it ends at `max_duration_s`, a normal ending:
+//! The shipped trial configuration, a value out of its range refused with the key named, and
+//! the exit code a trial's ending maps onto:
 //!
 //! ```
+//! use hrc_adapt::trial::config::{SHIPPED_TOML, TrialConfig};
+//! use hrc_adapt::trial::runtime::{exit_code, reason};
+//!
+//! let config = TrialConfig::shipped()?;
+//! assert_eq!(config.cue_rate_hz, 30.0);
+//! let bad = SHIPPED_TOML.replace("max_duration_s = 600.0", "max_duration_s = 1e20");
+//! let e = TrialConfig::from_toml_str(&bad, std::path::Path::new("config")).unwrap_err();
+//! assert!(e.to_string().starts_with("`max_duration_s` must be in (0, 3600] s"), "{e}");
+//! assert_eq!(exit_code(reason::COMPLETED), 0);
+//! assert_eq!(exit_code(reason::LINK_LOST), 3);
+//! # Ok::<(), hrc_adapt::Error>(())
+//! ```
+//!
+//! One simulated trial (simulated operator, `SimRobot` on the mock clock) of 1 s of trial time
+//! into a new run folder; it ends at `max_duration_s`, a normal ending (compiled only: the
+//! setup, the trial and its report take seconds in a debug build):
+//!
+//! ```no_run
 //! use hrc_adapt::trial::{TrialSpec, config::TrialConfig, operator::Level, run_simulated};
 //!
 //! let mut config = TrialConfig::shipped()?;
@@ -49,23 +68,27 @@
 //!     seed: 7,
 //!     config,
 //! };
-//! let tmp = tempfile::tempdir().expect("a temporary folder");
-//! let dir = run_simulated(&spec, &tmp.path().join("run"), false)?;
+//! let dir = run_simulated(&spec, std::path::Path::new("runs/example"), false)?;
 //! let summary = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json");
 //! assert!(summary.contains(r#""finish_reason": "max_duration""#));
 //! # Ok::<(), hrc_adapt::Error>(())
 //! ```
 
+// The module docs describe their modules' internals too: those links resolve with
+// `cargo doc --document-private-items`, and are plain text in the public docs.
+#![allow(rustdoc::private_intra_doc_links)]
+
+#[macro_use]
+mod error;
 pub mod assess_cmd;
 #[cfg(feature = "vision")]
 pub mod calibrate_cmd;
-mod error;
 pub mod experiment;
-pub mod report;
+mod report;
 pub mod robot_cmd;
-pub mod stats;
+mod stats;
 pub mod trial;
-pub mod vision_cmd;
+mod vision_cmd;
 
 pub use error::{Error, Result};
 

@@ -46,9 +46,16 @@ fn main() -> std::process::ExitCode {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("Error: {e:?}");
-            std::process::ExitCode::from(trial::exit_code(&e))
+            std::process::ExitCode::from(exit_code(&e))
         }
     }
+}
+
+/// The process exit code of an error: the library's ([`hrc_adapt::Error::exit_code`]: how a
+/// trial ended, README "Exit codes"), 1 for any other.
+fn exit_code(e: &anyhow::Error) -> u8 {
+    e.downcast_ref::<hrc_adapt::Error>()
+        .map_or(1, hrc_adapt::Error::exit_code)
 }
 
 fn run() -> anyhow::Result<()> {

@@ -6,7 +6,8 @@ use std::net::IpAddr;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
+use crate::Error;
+use crate::error::ResultExt as _;
 use clap::Args;
 use robot_io::client::{ClientConfig, RtdeClient};
 use robot_io::emulator::{Emulator, EmulatorConfig, ReplayMode, SimBackend, TraceBackend};
@@ -73,20 +74,23 @@ pub struct EmulateArgs {
     speedup: u32,
 }
 
-fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+fn runtime() -> crate::Result<tokio::runtime::Runtime> {
     tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
-        .context("starting the tokio runtime")
+        .map_err(|source| Error::Thread {
+            name: "tokio runtime",
+            source,
+        })
 }
 
 /// Runs `hrc-adapt record`: records the controller over RTDE into a CSV trace until Ctrl-C.
-pub fn record(args: RecordArgs) -> anyhow::Result<()> {
+pub fn record(args: RecordArgs) -> crate::Result<()> {
     runtime()?.block_on(record_async(args))
 }
 
-async fn record_async(args: RecordArgs) -> anyhow::Result<()> {
+async fn record_async(args: RecordArgs) -> crate::Result<()> {
     let fields: Vec<String> = if args.fields.is_empty() {
         STATE_FIELDS.iter().map(|s| (*s).to_owned()).collect()
     } else {
@@ -95,7 +99,10 @@ async fn record_async(args: RecordArgs) -> anyhow::Result<()> {
     if fields.first().map(String::as_str) != Some("timestamp")
         && !fields.iter().any(|f| f == "timestamp")
     {
-        anyhow::bail!("--fields must include timestamp (record.py files start with it)");
+        return Err(Error::usage(
+            "--fields",
+            "--fields must include timestamp (record.py files start with it)",
+        ));
     }
     // timestamp first, as record.py writes it.
     let mut ordered = vec!["timestamp".to_owned()];
@@ -127,8 +134,7 @@ async fn record_async(args: RecordArgs) -> anyhow::Result<()> {
             columns.extend((0..slot.ty.width()).map(|i| format!("{name}_{i}")));
         }
     }
-    let file =
-        File::create(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let file = File::create(&args.out).map_err(Error::io("create", &args.out))?;
     let mut writer = TraceWriter::new(BufWriter::new(file), &columns, &WriteOptions::record_py())?;
     writer.flush()?;
     let mut buf = client.output_buffer();
@@ -149,7 +155,7 @@ async fn record_async(args: RecordArgs) -> anyhow::Result<()> {
     loop {
         tokio::select! {
             r = &mut ctrl_c => {
-                r.context("waiting for ctrl-c")?;
+                r.map_err(|source| Error::Thread { name: "Ctrl-C handler", source })?;
                 break;
             }
             r = client.recv_timeout(&mut buf, Duration::from_secs(5)) => {
@@ -193,11 +199,11 @@ async fn record_async(args: RecordArgs) -> anyhow::Result<()> {
 }
 
 /// Runs `hrc-adapt emulate`: serves the controller emulator until Ctrl-C.
-pub fn emulate(args: EmulateArgs) -> anyhow::Result<()> {
+pub fn emulate(args: EmulateArgs) -> crate::Result<()> {
     runtime()?.block_on(emulate_async(args))
 }
 
-async fn emulate_async(args: EmulateArgs) -> anyhow::Result<()> {
+async fn emulate_async(args: EmulateArgs) -> crate::Result<()> {
     let cfg = EmulatorConfig {
         bind: args.bind,
         rtde_port: args.rtde_port,
@@ -209,7 +215,7 @@ async fn emulate_async(args: EmulateArgs) -> anyhow::Result<()> {
     };
     let backend: Box<dyn robot_io::EmulatorBackend> = match (&args.trace, args.sim) {
         (Some(path), false) => {
-            let trace = Trace::read(path).with_context(|| format!("reading {}", path.display()))?;
+            let trace = Trace::read(path).map_err(|e| Error::from(e).in_file(path))?;
             let report = trace.report();
             tracing::info!("trace {}: {} rows, {report:?}", path.display(), trace.len());
             let mode = if args.interpolate {
@@ -220,7 +226,12 @@ async fn emulate_async(args: EmulateArgs) -> anyhow::Result<()> {
             Box::new(TraceBackend::new(trace, mode)?)
         }
         (None, true) => Box::new(SimBackend::new(SimRobot::new(SimConfig::ur5e())?)),
-        _ => anyhow::bail!("give exactly one of --sim and --trace"),
+        _ => {
+            return Err(Error::usage(
+                "--sim, --trace",
+                "give exactly one of --sim and --trace",
+            ));
+        }
     };
     let emu = Emulator::start(cfg, backend).await?;
     eprintln!(
@@ -232,7 +243,10 @@ async fn emulate_async(args: EmulateArgs) -> anyhow::Result<()> {
     );
     tokio::signal::ctrl_c()
         .await
-        .context("waiting for ctrl-c")?;
+        .map_err(|source| Error::Thread {
+            name: "Ctrl-C handler",
+            source,
+        })?;
     drop(emu);
     Ok(())
 }

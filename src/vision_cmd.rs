@@ -13,8 +13,9 @@ use std::ffi::OsStr;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context as _, bail};
 use clap::Args;
+
+use crate::Error;
 
 /// Video file extensions taken by `--cues` (compared case-insensitively).
 pub(crate) const VIDEO_EXTENSIONS: [&str; 4] = ["mp4", "avi", "mkv", "mov"];
@@ -49,12 +50,12 @@ pub(crate) enum CueInput {
 impl CueInput {
     /// Classifies a `--cues` argument. `camera` and `webcam:N[:WxH]` are keywords; a path is
     /// classified by its extension (files) or contents (folders: images, else KTH).
-    pub(crate) fn parse(arg: &Path) -> anyhow::Result<Self> {
+    pub(crate) fn parse(arg: &Path) -> crate::Result<Self> {
         Self::parse_flag(arg, "--cues")
     }
 
     /// [`Self::parse`] for the command-line flag `flag` (named in the errors).
-    pub(crate) fn parse_flag(arg: &Path, flag: &str) -> anyhow::Result<Self> {
+    pub(crate) fn parse_flag(arg: &Path, flag: &str) -> crate::Result<Self> {
         if let Some(s) = arg.to_str() {
             if s == "camera" {
                 return Ok(Self::Camera);
@@ -62,16 +63,22 @@ impl CueInput {
             if let Some(rest) = s.strip_prefix("webcam:") {
                 return parse_webcam(rest)
                     .ok_or_else(|| {
-                        anyhow::anyhow!(
-                            "{flag} {s}: expected webcam:N[:WxH] with N a device number and an \
-                             optional frame size in px (webcam:0, webcam:1:1280x720)"
+                        Error::usage(
+                            flag,
+                            format!(
+                                "{flag} {s}: expected webcam:N[:WxH] with N a device number and \
+                                 an optional frame size in px (webcam:0, webcam:1:1280x720)"
+                            ),
                         )
                     })
                     .map(|(device, size)| Self::Webcam { device, size });
             }
         }
-        let meta =
-            fs::metadata(arg).with_context(|| format!("cannot read {flag} {}", arg.display()))?;
+        let meta = fs::metadata(arg).map_err(|source| Error::Input {
+            arg: flag.to_owned(),
+            path: arg.to_path_buf(),
+            source,
+        })?;
         if meta.is_dir() {
             return Ok(if folder_has_images(arg)? {
                 Self::Images(arg.to_path_buf())
@@ -88,12 +95,17 @@ impl CueInput {
             "csv" => Self::CueCsv(arg.to_path_buf()),
             "bag" => Self::Bag(arg.to_path_buf()),
             e if VIDEO_EXTENSIONS.contains(&e) => Self::Video(arg.to_path_buf()),
-            _ => bail!(
-                "{flag} {}: unsupported input; expected a cue CSV (.csv), a KTH handover folder, \
-                 a video (.mp4 .avi .mkv .mov), an image folder, a RealSense .bag, `camera` or \
-                 `webcam:N[:WxH]`",
-                arg.display()
-            ),
+            _ => {
+                return Err(Error::usage(
+                    flag,
+                    format!(
+                        "{flag} {}: unsupported input; expected a cue CSV (.csv), a KTH handover \
+                         folder, a video (.mp4 .avi .mkv .mov), an image folder, a RealSense \
+                         .bag, `camera` or `webcam:N[:WxH]`",
+                        arg.display()
+                    ),
+                ));
+            }
         })
     }
 
@@ -136,11 +148,9 @@ fn parse_webcam(s: &str) -> Option<(u32, Option<(u32, u32)>)> {
 }
 
 /// Whether a folder holds at least one image file (subfolders are not looked into).
-fn folder_has_images(dir: &Path) -> anyhow::Result<bool> {
-    for entry in fs::read_dir(dir).with_context(|| format!("cannot list {}", dir.display()))? {
-        let path = entry
-            .with_context(|| format!("cannot list {}", dir.display()))?
-            .path();
+fn folder_has_images(dir: &Path) -> crate::Result<bool> {
+    for entry in fs::read_dir(dir).map_err(Error::io("list", dir))? {
+        let path = entry.map_err(Error::io("list", dir))?.path();
         let is_image = path
             .extension()
             .and_then(OsStr::to_str)
@@ -235,13 +245,16 @@ impl Default for CameraArgs {
 
 /// The error for a camera input in a build without the `vision` feature.
 #[cfg(not(feature = "vision"))]
-pub(crate) fn vision_missing(input: &CueInput) -> anyhow::Error {
-    anyhow::anyhow!(
-        "--cues {}: camera inputs need the `vision` feature; this hrc-adapt was built without \
-         it (rebuild with default features)",
-        input
-            .path()
-            .map_or_else(|| format!("{input:?}"), |p| p.display().to_string())
+pub(crate) fn vision_missing(input: &CueInput) -> Error {
+    Error::usage(
+        "--cues",
+        format!(
+            "--cues {}: camera inputs need the `vision` feature; this hrc-adapt was built \
+             without it (rebuild with default features)",
+            input
+                .path()
+                .map_or_else(|| format!("{input:?}"), |p| p.display().to_string())
+        ),
     )
 }
 
@@ -255,7 +268,8 @@ mod camera {
     use std::io::{BufWriter, Write};
     use std::path::{Path, PathBuf};
 
-    use anyhow::{Context as _, bail};
+    use crate::Error;
+    use crate::error::ResultExt as _;
     use assess::vision::cues::{CueConfig, CueExtractor, PerceivedCues, load_canonical_face};
     use assess::vision::pipeline::{Mode, Pipeline, PipelineConfig, Variant};
     use assess::vision::source::capture::{
@@ -290,14 +304,17 @@ mod camera {
             index: u64,
             width: u32,
             height: u32,
-        ) -> anyhow::Result<Intrinsics> {
+        ) -> crate::Result<Intrinsics> {
             match *self.size.get_or_insert((width, height)) {
                 (w, h) if (w, h) == (width, height) => Ok(self.arg.at_size(width, height)),
-                (w, h) => bail!(
-                    "frame {index} is {width} x {height} px but the first frame was {w} x {h} px: \
-                     --intrinsics hold for one camera (without it, each image of a folder gets \
-                     intrinsics from --hfov for its own size)"
-                ),
+                (w, h) => Err(Error::usage(
+                    "--intrinsics",
+                    format!(
+                        "frame {index} is {width} x {height} px but the first frame was {w} x {h} \
+                         px: --intrinsics hold for one camera (without it, each image of a \
+                         folder gets intrinsics from --hfov for its own size)"
+                    ),
+                )),
             }
         }
     }
@@ -336,12 +353,15 @@ mod camera {
         pub(crate) fn intrinsics_override(
             &self,
             arg: Option<IntrinsicsArg>,
-        ) -> anyhow::Result<Option<IntrinsicsArg>> {
+        ) -> crate::Result<Option<IntrinsicsArg>> {
             if arg.is_some() && self.own_intrinsics {
-                bail!(
-                    "--intrinsics: {} carries its own calibrated intrinsics; drop the flag",
-                    self.source.describe()
-                );
+                return Err(Error::usage(
+                    "--intrinsics",
+                    format!(
+                        "--intrinsics: {} carries its own calibrated intrinsics; drop the flag",
+                        self.source.describe()
+                    ),
+                ));
             }
             Ok(arg)
         }
@@ -364,17 +384,22 @@ mod camera {
         input: &CueInput,
         cam: &CameraArgs,
         depth: Option<&Path>,
-    ) -> anyhow::Result<Opened> {
+    ) -> crate::Result<Opened> {
         // Intrinsics given on the command line are not passed to the sources: the frame size
         // is not known here, so they are applied per frame by the caller ([`FixedIntrinsics`],
         // which refuses a size change); the sources give their own (a RealSense's, a depth.toml's,
         // else from the hfov for each frame's size).
         if depth.is_some() && !matches!(input, CueInput::Video(_) | CueInput::Images(_)) {
-            bail!("--depth applies to a video file or an image folder only");
+            return Err(Error::usage(
+                "--depth",
+                "--depth applies to a video file or an image folder only",
+            ));
         }
         let opened = match input {
             CueInput::CueCsv(_) | CueInput::Kth(_) => {
-                bail!("internal: {input:?} is a cue file, not a frame source")
+                return Err(Error::Internal {
+                    reason: format!("{input:?} is a cue file, not a frame source"),
+                });
             }
             CueInput::Video(p) => {
                 let source = VideoFileSource::open(
@@ -418,7 +443,7 @@ mod camera {
         Ok(opened)
     }
 
-    fn open_webcam(n: u32, size: Option<(u32, u32)>, cam: &CameraArgs) -> anyhow::Result<Opened> {
+    fn open_webcam(n: u32, size: Option<(u32, u32)>, cam: &CameraArgs) -> crate::Result<Opened> {
         let source = WebcamSource::open(
             n,
             WebcamOptions {
@@ -437,7 +462,7 @@ mod camera {
     }
 
     #[cfg(feature = "realsense")]
-    fn open_bag(p: &Path) -> anyhow::Result<Opened> {
+    fn open_bag(p: &Path) -> crate::Result<Opened> {
         use assess::vision::source::realsense::RealSenseSource;
         Ok(Opened {
             source: Box::new(RealSenseSource::open_bag(p)?),
@@ -448,18 +473,21 @@ mod camera {
     }
 
     #[cfg(not(feature = "realsense"))]
-    fn open_bag(p: &Path) -> anyhow::Result<Opened> {
-        bail!(
-            "--cues {}: RealSense .bag files need the `realsense` feature; this hrc-adapt was \
-             built without it (cargo build --release --features realsense, with librealsense2 \
-             from scripts/setup)",
-            p.display()
-        )
+    fn open_bag(p: &Path) -> crate::Result<Opened> {
+        Err(Error::usage(
+            "--cues",
+            format!(
+                "--cues {}: RealSense .bag files need the `realsense` feature; this hrc-adapt \
+                 was built without it (cargo build --release --features realsense, with \
+                 librealsense2 from scripts/setup)",
+                p.display()
+            ),
+        ))
     }
 
     /// `camera`: the first RealSense device (feature `realsense`), else webcam 0; an error
     /// naming both when neither is there.
-    fn open_camera(cam: &CameraArgs) -> anyhow::Result<Opened> {
+    fn open_camera(cam: &CameraArgs) -> crate::Result<Opened> {
         #[cfg(feature = "realsense")]
         let realsense_note = {
             use assess::vision::source::realsense::{
@@ -485,15 +513,19 @@ mod camera {
             "RealSense cameras need the `realsense` feature, which this build lacks".to_string();
         match open_webcam(0, None, cam) {
             Ok(opened) => Ok(opened),
-            Err(e) => bail!(
-                "no camera found: {realsense_note}, and webcam 0 cannot be opened ({e:#}); \
-                 connect a camera, or pass a recording to --cues"
-            ),
+            Err(e) => Err(Error::Camera {
+                camera: "--cues camera".into(),
+                reason: format!(
+                    "found no camera: {realsense_note}, and webcam 0 cannot be opened ({}); \
+                     connect a camera, or pass a recording to --cues",
+                    e.with_causes()
+                ),
+            }),
         }
     }
 
     /// Loads `--extrinsics`, or returns the identity with a loud warning.
-    pub(crate) fn load_extrinsics(cam: &CameraArgs) -> anyhow::Result<Extrinsics> {
+    pub(crate) fn load_extrinsics(cam: &CameraArgs) -> crate::Result<Extrinsics> {
         match &cam.extrinsics {
             Some(p) => Extrinsics::load(p)
                 .with_context(|| format!("cannot load the extrinsics {}", p.display())),
@@ -548,7 +580,7 @@ mod camera {
             config: PipelineConfig,
             extrinsics: Extrinsics,
             intrinsics: Option<IntrinsicsArg>,
-        ) -> anyhow::Result<Self> {
+        ) -> crate::Result<Self> {
             models::init_runtime(None).context("cannot load ONNX Runtime")?;
             let dir = models::model_dir();
             let pipeline = Pipeline::load(&dir, config).with_context(|| {
@@ -565,7 +597,7 @@ mod camera {
 
         /// Landmarks and cues of one frame (cue time = camera time). With `--intrinsics`, a
         /// frame whose size differs from the first is an error.
-        pub(crate) fn step(&mut self, frame: &CameraFrame) -> anyhow::Result<Perceived> {
+        pub(crate) fn step(&mut self, frame: &CameraFrame) -> crate::Result<Perceived> {
             let intrinsics = match &mut self.intrinsics {
                 Some(fixed) => fixed.at(frame.index, frame.color.width, frame.color.height)?,
                 None => frame.intrinsics,
@@ -611,12 +643,10 @@ mod camera {
 
     impl LandmarkCsv {
         /// Creates the file and writes the header.
-        pub(crate) fn create(path: &Path) -> anyhow::Result<Self> {
-            let file =
-                File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+        pub(crate) fn create(path: &Path) -> crate::Result<Self> {
+            let file = File::create(path).map_err(Error::io("create", path))?;
             let mut out = BufWriter::new(file);
-            writeln!(out, "{LANDMARK_HEADER}")
-                .with_context(|| format!("cannot write {}", path.display()))?;
+            writeln!(out, "{LANDMARK_HEADER}").map_err(Error::io("write", path))?;
             Ok(Self {
                 path: path.to_path_buf(),
                 out,
@@ -625,7 +655,7 @@ mod camera {
         }
 
         /// Appends one frame's landmarks.
-        pub(crate) fn write(&mut self, frame: u64, t: f64, lm: &Landmarks) -> anyhow::Result<()> {
+        pub(crate) fn write(&mut self, frame: u64, t: f64, lm: &Landmarks) -> crate::Result<()> {
             if let Some(pose) = &lm.pose {
                 for (i, p) in pose.points.iter().enumerate() {
                     self.row(frame, t, "pose", i, p.x, p.y, p.visibility)?;
@@ -655,7 +685,7 @@ mod camera {
             x: f64,
             y: f64,
             score: f64,
-        ) -> anyhow::Result<()> {
+        ) -> crate::Result<()> {
             self.line.clear();
             let _ = writeln!(
                 self.line,
@@ -663,14 +693,12 @@ mod camera {
             );
             self.out
                 .write_all(self.line.as_bytes())
-                .with_context(|| format!("cannot write {}", self.path.display()))
+                .map_err(Error::io("write", &self.path))
         }
 
         /// Flushes the file.
-        pub(crate) fn finish(mut self) -> anyhow::Result<()> {
-            self.out
-                .flush()
-                .with_context(|| format!("cannot write {}", self.path.display()))
+        pub(crate) fn finish(mut self) -> crate::Result<()> {
+            self.out.flush().map_err(Error::io("write", &self.path))
         }
     }
 
@@ -694,22 +722,24 @@ mod camera {
         /// Creates the sink for `path`: `.avi` → video at `fps` [1/s] (the source's nominal
         /// rate), no extension → PNG folder (created; it must not exist or be empty); other
         /// extensions are refused. `flag` names the option in the errors.
-        pub(crate) fn create(path: &Path, flag: &str, fps: f64) -> anyhow::Result<Self> {
+        pub(crate) fn create(path: &Path, flag: &str, fps: f64) -> crate::Result<Self> {
             match path.extension().and_then(|e| e.to_str()) {
                 None => {
                     if path.exists()
                         && std::fs::read_dir(path)
-                            .with_context(|| format!("cannot list {}", path.display()))?
+                            .map_err(Error::io("list", path))?
                             .next()
                             .is_some()
                     {
-                        bail!(
-                            "{flag} {}: the folder exists and is not empty",
-                            path.display()
-                        );
+                        return Err(Error::usage(
+                            flag,
+                            format!(
+                                "{flag} {}: the folder exists and is not empty",
+                                path.display()
+                            ),
+                        ));
                     }
-                    std::fs::create_dir_all(path)
-                        .with_context(|| format!("cannot create {}", path.display()))?;
+                    std::fs::create_dir_all(path).map_err(Error::io("create", path))?;
                     Ok(Self::Pngs {
                         dir: path.to_path_buf(),
                         n: 0,
@@ -717,23 +747,29 @@ mod camera {
                 }
                 Some(e) if e.eq_ignore_ascii_case("avi") => {
                     if path.exists() {
-                        bail!("{flag} {}: the file exists", path.display());
+                        return Err(Error::usage(
+                            flag,
+                            format!("{flag} {}: the file exists", path.display()),
+                        ));
                     }
                     Ok(Self::Avi(
                         VideoSink::create(path, fps)
                             .with_context(|| format!("{flag} {}", path.display()))?,
                     ))
                 }
-                Some(_) => bail!(
-                    "{flag} {}: expected an .avi file, or a path without extension for a PNG \
-                     folder",
-                    path.display()
-                ),
+                Some(_) => Err(Error::usage(
+                    flag,
+                    format!(
+                        "{flag} {}: expected an .avi file, or a path without extension for a \
+                         PNG folder",
+                        path.display()
+                    ),
+                )),
             }
         }
 
         /// Appends one image.
-        pub(crate) fn push(&mut self, image: &RgbImage) -> anyhow::Result<()> {
+        pub(crate) fn push(&mut self, image: &RgbImage) -> crate::Result<()> {
             match self {
                 Self::Pngs { dir, n } => {
                     let p = dir.join(format!("{:06}.png", *n));
@@ -744,14 +780,15 @@ mod camera {
                 }
                 Self::Avi(v) => {
                     if v.size().is_some_and(|s| s != (image.width, image.height)) {
-                        bail!(
-                            "{}: a video holds frames of one size, and this one is {} x {} px; \
-                             for images of several sizes write a PNG folder (a path without \
-                             extension)",
+                        return Err(Error::data(
                             v.path().display(),
-                            image.width,
-                            image.height
-                        );
+                            format!(
+                                "a video holds frames of one size, and this one is {} x {} px; \
+                                 for images of several sizes write a PNG folder (a path without \
+                                 extension)",
+                                image.width, image.height
+                            ),
+                        ));
                     }
                     Ok(v.write(image)?)
                 }
@@ -759,7 +796,7 @@ mod camera {
         }
 
         /// Closes the sink (a video's index is written here).
-        pub(crate) fn finish(self) -> anyhow::Result<()> {
+        pub(crate) fn finish(self) -> crate::Result<()> {
             match self {
                 Self::Pngs { .. } => Ok(()),
                 Self::Avi(v) => Ok(v.finish()?),
@@ -776,7 +813,7 @@ mod camera {
         extrinsics: &Extrinsics,
         workspace: &Workspace,
         a: Option<&Assessment>,
-    ) -> anyhow::Result<RgbImage> {
+    ) -> crate::Result<RgbImage> {
         let mut img = frame.color.clone();
         let proj = draw::Projector::new(p.intrinsics, extrinsics);
         draw::areas(&mut img, &proj, workspace, a.and_then(|a| a.confirmed))?;
@@ -879,7 +916,7 @@ mod tests {
         assert!(e.contains("unsupported input"), "{e}");
         let e = CueInput::parse(&d.join("missing.mp4")).unwrap_err();
         assert!(
-            format!("{e:#}").starts_with(&format!(
+            e.with_causes().to_string().starts_with(&format!(
                 "cannot read --cues {}",
                 d.join("missing.mp4").display()
             )),

@@ -51,28 +51,32 @@ pub(crate) struct TrialOutcome {
 }
 
 /// Parses one `summary.json` text (the schema of the module docs).
-pub(crate) fn parse_summary(text: &str) -> anyhow::Result<TrialOutcome> {
-    use anyhow::Context as _;
-    let v: serde_json::Value = serde_json::from_str(text).context("summary.json is not JSON")?;
-    let meta_str = |key: &str| -> anyhow::Result<String> {
+pub(crate) fn parse_summary(text: &str) -> crate::Result<TrialOutcome> {
+    use crate::Error;
+    let bad = |reason: String| Error::data("summary.json", reason);
+    let v: serde_json::Value =
+        serde_json::from_str(text).map_err(Error::json("read", "summary.json"))?;
+    let meta_str = |key: &str| -> crate::Result<String> {
         v["meta"][key]
             .as_str()
             .map(str::to_owned)
-            .with_context(|| format!("summary.json: meta.{key} missing or not a string"))
+            .ok_or_else(|| bad(format!("meta.{key} missing or not a string")))
     };
-    let num = |key: &str| -> anyhow::Result<f64> {
+    let num = |key: &str| -> crate::Result<f64> {
         v[key]
             .as_f64()
-            .with_context(|| format!("summary.json: {key} missing or not a number"))
+            .ok_or_else(|| bad(format!("{key} missing or not a number")))
     };
     // A number, or NaN for `null`; anything else (absent, a string, an object) is an error.
-    let nullable = |outer: &str, inner: &str| -> anyhow::Result<f64> {
+    let nullable = |outer: &str, inner: &str| -> crate::Result<f64> {
         let x = &v[outer][inner];
         if x.is_null() && v[outer].as_object().is_some_and(|o| o.contains_key(inner)) {
             return Ok(f64::NAN);
         }
-        x.as_f64().with_context(|| {
-            format!("summary.json: {outer}.{inner} missing or neither a number nor null")
+        x.as_f64().ok_or_else(|| {
+            bad(format!(
+                "{outer}.{inner} missing or neither a number nor null"
+            ))
         })
     };
     let (participant, condition, policy) = (
@@ -82,18 +86,20 @@ pub(crate) fn parse_summary(text: &str) -> anyhow::Result<TrialOutcome> {
     );
     let simulated = v["meta"]["simulated"]
         .as_bool()
-        .context("summary.json: meta.simulated missing or not a boolean")?;
+        .ok_or_else(|| bad("meta.simulated missing or not a boolean".into()))?;
     let handovers = v["handovers"]
         .as_array()
-        .context("summary.json: handovers missing or not an array")?;
-    let wait_sum = |key: &str| -> anyhow::Result<f64> {
+        .ok_or_else(|| bad("handovers missing or not an array".into()))?;
+    let wait_sum = |key: &str| -> crate::Result<f64> {
         handovers.iter().enumerate().try_fold(0.0, |acc, (i, h)| {
             let w = &h[key];
             if w.is_null() && h.as_object().is_some_and(|o| o.contains_key(key)) {
                 return Ok(acc);
             }
-            w.as_f64().map(|w| acc + w).with_context(|| {
-                format!("summary.json: handovers[{i}].{key} missing or neither a number nor null")
+            w.as_f64().map(|w| acc + w).ok_or_else(|| {
+                bad(format!(
+                    "handovers[{i}].{key} missing or neither a number nor null"
+                ))
             })
         })
     };
@@ -116,11 +122,14 @@ pub(crate) fn parse_summary(text: &str) -> anyhow::Result<TrialOutcome> {
 
 /// Reads `summary.json` from every direct sub-folder of `runs` that has one, sorted by folder
 /// name (so the result does not depend on the file system's order).
-pub(crate) fn read_outcomes(runs: &std::path::Path) -> anyhow::Result<Vec<TrialOutcome>> {
-    use anyhow::Context as _;
+pub(crate) fn read_outcomes(runs: &std::path::Path) -> crate::Result<Vec<TrialOutcome>> {
+    use crate::Error;
     let mut paths = Vec::new();
-    for entry in std::fs::read_dir(runs).with_context(|| format!("reading {}", runs.display()))? {
-        let path = entry?.path().join("summary.json");
+    for entry in std::fs::read_dir(runs).map_err(Error::io("list", runs))? {
+        let path = entry
+            .map_err(Error::io("list", runs))?
+            .path()
+            .join("summary.json");
         if path.is_file() {
             paths.push(path);
         }
@@ -129,9 +138,8 @@ pub(crate) fn read_outcomes(runs: &std::path::Path) -> anyhow::Result<Vec<TrialO
     paths
         .iter()
         .map(|p| {
-            let text =
-                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
-            parse_summary(&text).with_context(|| format!("in {}", p.display()))
+            let text = std::fs::read_to_string(p).map_err(Error::io("read", p))?;
+            parse_summary(&text).map_err(|e| e.in_file(p))
         })
         .collect()
 }
@@ -240,7 +248,7 @@ pub(crate) fn compare_policies(
     outcomes: &[TrialOutcome],
     a: &str,
     b: &str,
-) -> anyhow::Result<Vec<PolicyTest>> {
+) -> crate::Result<Vec<PolicyTest>> {
     // participant -> condition -> (a, b)
     let mut by_participant: BTreeMap<&str, BTreeMap<&str, [Option<&TrialOutcome>; 2]>> =
         BTreeMap::new();
@@ -257,12 +265,15 @@ pub(crate) fn compare_policies(
             .or_default()
             .entry(&o.condition)
             .or_default();
-        anyhow::ensure!(
+        ensure!(
             slot[side].is_none(),
-            "participant {} ran condition {} with policy {} twice",
-            o.participant,
-            o.condition,
-            o.policy
+            crate::Error::data(
+                "the trial outcomes",
+                format!(
+                    "participant {} ran condition {} with policy {} twice",
+                    o.participant, o.condition, o.policy
+                )
+            )
         );
         slot[side] = Some(o);
     }
@@ -281,11 +292,14 @@ pub(crate) fn compare_policies(
                 xb.push(pairs.iter().map(|p| p.1).sum::<f64>() / k);
             }
         }
-        anyhow::ensure!(
+        ensure!(
             by_participant
                 .values()
                 .any(|c| c.values().any(|s| s[0].is_some() && s[1].is_some())),
-            "no participant ran both {a} and {b}"
+            crate::Error::data(
+                "the trial outcomes",
+                format!("no participant ran both {a} and {b}")
+            )
         );
         let wilcoxon = stats::wilcoxon(&xa, &xb, stats::WilcoxonOptions::default());
         let mut d: Vec<f64> = xa.iter().zip(&xb).map(|(x, y)| x - y).collect();
@@ -303,7 +317,7 @@ pub(crate) fn compare_policies(
         .filter_map(|t| Some(t.wilcoxon.as_ref().ok()?.p_value))
         .collect();
     let mut adjusted = stats::holm(&p)
-        .map_err(|e| anyhow::anyhow!("Holm: {e}"))?
+        .map_err(|e| crate::Error::data("Holm", e.to_string()))?
         .into_iter();
     for t in tests.iter_mut().filter(|t| t.wilcoxon.is_ok()) {
         t.p_holm = adjusted.next();

@@ -15,7 +15,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context as _;
+use crate::Error;
 use plotters::prelude::*;
 use policies::Schedule;
 use serde_json::{Value, json};
@@ -64,7 +64,7 @@ fn num(x: f64) -> Value {
 
 /// Writes `experiment_summary.json`, the box-plot PNGs and `experiment_report.html` into `dir`;
 /// returns the report's path.
-pub(crate) fn write(dir: &Path, inp: &Inputs<'_>) -> anyhow::Result<PathBuf> {
+pub(crate) fn write(dir: &Path, inp: &Inputs<'_>) -> crate::Result<PathBuf> {
     let [a, b] = [&inp.config.policies[0], &inp.config.policies[1]];
     let conditions: Vec<String> = inp
         .config
@@ -169,17 +169,17 @@ pub(crate) fn write(dir: &Path, inp: &Inputs<'_>) -> anyhow::Result<PathBuf> {
                 Err(e) => json!({"metric": m, "not_tested": e.to_string()}),
             }).collect()))).collect::<serde_json::Map<_, _>>(),
     });
-    let mut text = serde_json::to_string_pretty(&summary)?;
+    let summary_path = dir.join(SUMMARY_FILE);
+    let mut text = serde_json::to_string_pretty(&summary)
+        .map_err(Error::json("write", summary_path.display()))?;
     text.push('\n');
-    std::fs::write(dir.join(SUMMARY_FILE), text)
-        .with_context(|| format!("writing {}", dir.join(SUMMARY_FILE).display()))?;
+    std::fs::write(&summary_path, text).map_err(Error::io("write", &summary_path))?;
 
     // ---- Plots
     let mut pngs = Vec::new();
     for (m, name) in METRICS.iter().enumerate() {
         let path = dir.join(format!("box_{name}.png"));
-        box_plot(&path, inp.outcomes, &inp.config.policies, &conditions, m)
-            .with_context(|| format!("plotting {}", path.display()))?;
+        box_plot(&path, inp.outcomes, &inp.config.policies, &conditions, m)?;
         pngs.push(path);
     }
 
@@ -329,7 +329,7 @@ pub(crate) fn write(dir: &Path, inp: &Inputs<'_>) -> anyhow::Result<PathBuf> {
     }
     w.push_str("</table>\n<h2>Box plots (SIMULATED)</h2>\n");
     for (path, label) in pngs.iter().zip(LABELS) {
-        let bytes = std::fs::read(path)?;
+        let bytes = std::fs::read(path).map_err(Error::io("read", path))?;
         w.push_str(&format!(
             "<h3>{label}</h3>\n<img alt=\"SIMULATED: {label} per policy and condition\" \
              src=\"data:image/png;base64,{}\">\n",
@@ -348,7 +348,7 @@ pub(crate) fn write(dir: &Path, inp: &Inputs<'_>) -> anyhow::Result<PathBuf> {
     }
     w.push_str("</table>\n</body></html>\n");
     let path = dir.join(REPORT_FILE);
-    std::fs::write(&path, h).with_context(|| format!("writing {}", path.display()))?;
+    std::fs::write(&path, h).map_err(Error::io("write", &path))?;
     Ok(path)
 }
 
@@ -404,8 +404,12 @@ fn box_plot(
     policies: &[String],
     conditions: &[String],
     m: usize,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     register_font()?;
+    let plot = |e: &dyn std::fmt::Display| Error::Plot {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    };
     let values: Vec<Vec<Vec<f64>>> = conditions
         .iter()
         .map(|c| {
@@ -428,7 +432,7 @@ fn box_plot(
     let (y0, y1) = (lo - pad, hi + pad);
 
     let root = BitMapBackend::new(path, (900, 480)).into_drawing_area();
-    root.fill(&WHITE)?;
+    root.fill(&WHITE).map_err(|e| plot(&e))?;
     let nc = conditions.len();
     let mut chart = ChartBuilder::on(&root)
         .caption(
@@ -438,7 +442,8 @@ fn box_plot(
         .margin(12)
         .x_label_area_size(45)
         .y_label_area_size(70)
-        .build_cartesian_2d(-0.5..(nc as f64 - 0.5), y0..y1)?;
+        .build_cartesian_2d(-0.5..(nc as f64 - 0.5), y0..y1)
+        .map_err(|e| plot(&e))?;
     let names = conditions.to_vec();
     let x_fmt = move |x: &f64| {
         let i = x.round();
@@ -457,7 +462,8 @@ fn box_plot(
         .y_desc(LABELS[m])
         .axis_desc_style((FAMILY, 17).into_font().color(&BLACK))
         .label_style((FAMILY, 15).into_font().color(&BLACK))
-        .draw()?;
+        .draw()
+        .map_err(|e| plot(&e))?;
 
     let width = 0.32;
     for (ci, per_policy) in values.iter().enumerate() {
@@ -483,36 +489,43 @@ fn box_plot(
                 .find(|&v| v <= q3 + 1.5 * iqr)
                 .unwrap_or(q3);
             let (l, r) = (x - width / 2.0, x + width / 2.0);
-            chart.draw_series([
-                Rectangle::new([(l, q1), (r, q3)], colour.mix(0.25).filled()),
-                Rectangle::new([(l, q1), (r, q3)], colour.stroke_width(2)),
-            ])?;
+            chart
+                .draw_series([
+                    Rectangle::new([(l, q1), (r, q3)], colour.mix(0.25).filled()),
+                    Rectangle::new([(l, q1), (r, q3)], colour.stroke_width(2)),
+                ])
+                .map_err(|e| plot(&e))?;
             let line = |a: (f64, f64), b: (f64, f64), sw: u32| {
                 PathElement::new(vec![a, b], colour.stroke_width(sw))
             };
-            chart.draw_series([
-                line((l, q2), (r, q2), 3),
-                line((x, q3), (x, w_hi), 2),
-                line((x, q1), (x, w_lo), 2),
-                line((x - width / 4.0, w_hi), (x + width / 4.0, w_hi), 2),
-                line((x - width / 4.0, w_lo), (x + width / 4.0, w_lo), 2),
-            ])?;
+            chart
+                .draw_series([
+                    line((l, q2), (r, q2), 3),
+                    line((x, q3), (x, w_hi), 2),
+                    line((x, q1), (x, w_lo), 2),
+                    line((x - width / 4.0, w_hi), (x + width / 4.0, w_hi), 2),
+                    line((x - width / 4.0, w_lo), (x + width / 4.0, w_lo), 2),
+                ])
+                .map_err(|e| plot(&e))?;
             // Every trial as a dot, spread across the box so ties stay visible.
             let n = xs.len();
-            chart.draw_series(xs.iter().enumerate().map(|(k, &v)| {
-                let dx = if n > 1 {
-                    (k as f64 / (n - 1) as f64 - 0.5) * width * 0.7
-                } else {
-                    0.0
-                };
-                Circle::new((x + dx, v), 3, BLACK.mix(0.7).filled())
-            }))?;
+            chart
+                .draw_series(xs.iter().enumerate().map(|(k, &v)| {
+                    let dx = if n > 1 {
+                        (k as f64 / (n - 1) as f64 - 0.5) * width * 0.7
+                    } else {
+                        0.0
+                    };
+                    Circle::new((x + dx, v), 3, BLACK.mix(0.7).filled())
+                }))
+                .map_err(|e| plot(&e))?;
         }
     }
     for (pi, p) in policies.iter().enumerate() {
         let colour = POLICY_COLOURS[pi % POLICY_COLOURS.len()];
         chart
-            .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
+            .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+            .map_err(|e| plot(&e))?
             .label(p.as_str())
             .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 16, y + 6)], colour.filled()));
     }
@@ -522,8 +535,9 @@ fn box_plot(
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
         .label_font((FAMILY, 15).into_font().color(&BLACK))
-        .draw()?;
-    root.present()?;
+        .draw()
+        .map_err(|e| plot(&e))?;
+    root.present().map_err(|e| plot(&e))?;
     Ok(())
 }
 

@@ -23,7 +23,7 @@
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
 
-use anyhow::Context as _;
+use crate::Error;
 
 use super::PlannedTrial;
 use crate::stats;
@@ -77,19 +77,19 @@ fn ask(
     input: &mut impl BufRead,
     out: &mut impl Write,
     prompt: &str,
-) -> anyhow::Result<Option<String>> {
-    write!(out, "{prompt}")?;
-    out.flush()?;
+) -> crate::Result<Option<String>> {
+    write!(out, "{prompt}").map_err(to_console)?;
+    out.flush().map_err(to_console)?;
     let mut line = String::new();
-    if input.read_line(&mut line)? == 0 {
-        writeln!(out)?;
+    if input.read_line(&mut line).map_err(from_console)? == 0 {
+        writeln!(out).map_err(to_console)?;
         return Ok(None);
     }
     Ok(Some(line.trim().to_owned()))
 }
 
 /// Asks `start / pause / skip / quit` until a valid answer (`None` input = quit).
-fn ask_command(input: &mut impl BufRead, out: &mut impl Write) -> anyhow::Result<Command> {
+fn ask_command(input: &mut impl BufRead, out: &mut impl Write) -> crate::Result<Command> {
     loop {
         let Some(a) = ask(input, out, "start / pause / skip / quit > ")? else {
             return Ok(Command::Quit);
@@ -102,17 +102,19 @@ fn ask_command(input: &mut impl BufRead, out: &mut impl Write) -> anyhow::Result
             other => writeln!(
                 out,
                 "unknown answer {other:?}: type start, pause, skip or quit"
-            )?,
+            )
+            .map_err(to_console)?,
         }
     }
 }
 
 /// Asks the six ratings, each until it is a number in [0, 20]; `None` at the end of the input.
-fn ask_tlx(input: &mut impl BufRead, out: &mut impl Write) -> anyhow::Result<Option<[f64; 6]>> {
+fn ask_tlx(input: &mut impl BufRead, out: &mut impl Write) -> crate::Result<Option<[f64; 6]>> {
     writeln!(
         out,
         "NASA-TLX: rate each scale from 0 (very low) to 20 (very high)"
-    )?;
+    )
+    .map_err(to_console)?;
     let mut ratings = [0.0; 6];
     for (slot, (_, label)) in ratings.iter_mut().zip(TLX_SCALES) {
         loop {
@@ -125,7 +127,8 @@ fn ask_tlx(input: &mut impl BufRead, out: &mut impl Write) -> anyhow::Result<Opt
                     *slot = r;
                     break;
                 }
-                _ => writeln!(out, "  {a:?} is not a rating: enter a number from 0 to 20")?,
+                _ => writeln!(out, "  {a:?} is not a rating: enter a number from 0 to 20")
+                    .map_err(to_console)?,
             }
         }
     }
@@ -134,18 +137,13 @@ fn ask_tlx(input: &mut impl BufRead, out: &mut impl Write) -> anyhow::Result<Opt
 
 /// Appends one row to `nasa_tlx.csv` (writing the header first if the file is new or empty)
 /// and flushes it.
-fn append_tlx(
-    path: &Path,
-    trial: &PlannedTrial,
-    ratings: [f64; 6],
-    raw: f64,
-) -> anyhow::Result<()> {
+fn append_tlx(path: &Path, trial: &PlannedTrial, ratings: [f64; 6], raw: f64) -> crate::Result<()> {
     let file = std::fs::OpenOptions::new()
         .create(true)
         .append(true)
         .open(path)
-        .with_context(|| format!("opening {}", path.display()))?;
-    let new = file.metadata()?.len() == 0;
+        .map_err(Error::io("open", path))?;
+    let new = file.metadata().map_err(Error::io("inspect", path))?.len() == 0;
     let mut w = csv::WriterBuilder::new()
         .has_headers(false)
         .from_writer(file);
@@ -153,7 +151,7 @@ fn append_tlx(
         let mut header = vec!["participant", "trial", "condition", "policy"];
         header.extend(TLX_SCALES.iter().map(|(c, _)| *c));
         header.push("raw_tlx");
-        w.write_record(&header)?;
+        w.write_record(&header).map_err(Error::csv("write", path))?;
     }
     let mut row = vec![
         trial.participant.clone(),
@@ -163,9 +161,8 @@ fn append_tlx(
     ];
     row.extend(ratings.iter().map(f64::to_string));
     row.push(format!("{raw:.4}"));
-    w.write_record(&row)?;
-    w.flush()
-        .with_context(|| format!("writing {}", path.display()))?;
+    w.write_record(&row).map_err(Error::csv("write", path))?;
+    w.flush().map_err(Error::io("write", path))?;
     Ok(())
 }
 
@@ -177,13 +174,13 @@ pub(crate) fn run_session(
     dir: &Path,
     input: &mut impl BufRead,
     out: &mut impl Write,
-    run_trial: &mut dyn FnMut(&PlannedTrial, &Path) -> anyhow::Result<PathBuf>,
-) -> anyhow::Result<SessionRecord> {
+    run_trial: &mut dyn FnMut(&PlannedTrial, &Path) -> crate::Result<PathBuf>,
+) -> crate::Result<SessionRecord> {
     let tlx_path = dir.join(TLX_FILE);
     let mut record = SessionRecord::default();
     let m = trials.len();
     for (i, trial) in trials.iter().enumerate() {
-        writeln!(out)?;
+        writeln!(out).map_err(to_console)?;
         writeln!(
             out,
             "Next: trial {} of {m} for {}: condition {}, policy {} (folder {})",
@@ -192,7 +189,8 @@ pub(crate) fn run_session(
             trial.condition,
             trial.policy,
             trial.folder
-        )?;
+        )
+        .map_err(to_console)?;
         let command = loop {
             match ask_command(input, out)? {
                 Command::Pause => {
@@ -205,12 +203,12 @@ pub(crate) fn run_session(
         };
         match command {
             Command::Quit => {
-                writeln!(out, "session quit before trial {} of {m}", i + 1)?;
+                writeln!(out, "session quit before trial {} of {m}", i + 1).map_err(to_console)?;
                 record.quit = true;
                 break;
             }
             Command::Skip => {
-                writeln!(out, "trial {} of {m} skipped", i + 1)?;
+                writeln!(out, "trial {} of {m} skipped", i + 1).map_err(to_console)?;
                 record
                     .steps
                     .push((trial.folder.clone(), StepOutcome::Skipped));
@@ -219,29 +217,32 @@ pub(crate) fn run_session(
             Command::Pause => unreachable!("handled above"),
             Command::Start => {}
         }
-        writeln!(out, "running trial {} of {m} ...", i + 1)?;
-        out.flush()?;
+        writeln!(out, "running trial {} of {m} ...", i + 1).map_err(to_console)?;
+        out.flush().map_err(to_console)?;
         if let Err(e) = run_trial(trial, &dir.join(&trial.folder)) {
-            let e = format!("{e:#}");
-            writeln!(out, "trial {} of {m} failed: {e}", i + 1)?;
+            let e = e.with_causes().to_string();
+            writeln!(out, "trial {} of {m} failed: {e}", i + 1).map_err(to_console)?;
             record
                 .steps
                 .push((trial.folder.clone(), StepOutcome::Failed(e)));
             continue;
         }
-        writeln!(out, "trial {} of {m} finished", i + 1)?;
+        writeln!(out, "trial {} of {m} finished", i + 1).map_err(to_console)?;
         let Some(ratings) = ask_tlx(input, out)? else {
             writeln!(
                 out,
                 "input ended before the ratings of trial {} were complete",
                 i + 1
-            )?;
+            )
+            .map_err(to_console)?;
             record.quit = true;
             break;
         };
-        let raw = stats::raw_tlx(ratings).context("NASA-TLX ratings checked above")?;
+        let raw = stats::raw_tlx(ratings).map_err(|e| Error::Internal {
+            reason: format!("NASA-TLX ratings checked above: {e}"),
+        })?;
         append_tlx(&tlx_path, trial, ratings, raw)?;
-        writeln!(out, "raw TLX {raw:.2} saved to {}", tlx_path.display())?;
+        writeln!(out, "raw TLX {raw:.2} saved to {}", tlx_path.display()).map_err(to_console)?;
         record
             .steps
             .push((trial.folder.clone(), StepOutcome::Done { raw_tlx: raw }));
@@ -255,6 +256,23 @@ pub(crate) fn run_session(
         count(|o| matches!(o, StepOutcome::Failed(_))),
         count(|o| matches!(o, StepOutcome::Skipped)),
         m - record.steps.len()
-    )?;
+    )
+    .map_err(to_console)?;
     Ok(record)
+}
+
+/// The [`Error::Console`] of writing a prompt.
+fn to_console(source: std::io::Error) -> Error {
+    Error::Console {
+        action: "write a prompt to",
+        source,
+    }
+}
+
+/// The [`Error::Console`] of reading an answer (a Ctrl-C there is inside it).
+fn from_console(source: std::io::Error) -> Error {
+    Error::Console {
+        action: "read an answer from",
+        source,
+    }
 }

@@ -164,7 +164,7 @@ fn an_experiment_whose_trials_failed_exits_non_zero_after_writing_its_report() {
     ] as [&std::ffi::OsStr; 7])
     .unwrap()
     .args;
-    let e = format!("{:#}", run(args).unwrap_err());
+    let e = run(args).unwrap_err().with_causes().to_string();
     assert!(e.contains("2 of 2 trials failed"), "{e}");
     // Everything that could be written was, and the message says where.
     let dirs: Vec<_> = std::fs::read_dir(&root).unwrap().collect();
@@ -200,7 +200,10 @@ fn shipped_experiment_config_is_the_acceptance_design() {
         std::fs::read_to_string(&path).unwrap() + "\nparticipant = 3\n",
     )
     .unwrap();
-    let err = format!("{:#}", ExperimentConfig::from_file(&bad).unwrap_err());
+    let err = ExperimentConfig::from_file(&bad)
+        .unwrap_err()
+        .with_causes()
+        .to_string();
     assert!(err.contains("participant"), "{err}");
 }
 
@@ -251,7 +254,10 @@ fn guided_session_follows_the_script_and_appends_the_ratings() {
     let record = session::run_session(&trials, dir, &mut input, &mut out, &mut |t, folder| {
         ran.push(t.position);
         assert_eq!(folder, dir.join(&t.folder));
-        anyhow::ensure!(t.position != 3, "robot not in remote control");
+        ensure!(
+            t.position != 3,
+            crate::Error::usage("--robot", "robot not in remote control")
+        );
         Ok(folder.to_path_buf())
     })
     .unwrap();
@@ -348,7 +354,7 @@ fn ctrl_c_at_a_session_prompt_ends_the_session_and_runs_nothing() {
     })
     .unwrap_err();
     assert!(crate::trial::prompt::is_interrupted(&e), "{e:#}");
-    assert!(format!("{e:#}").contains("interrupted"), "{e:#}");
+    assert!(e.with_causes().to_string().contains("interrupted"), "{e:#}");
     assert_eq!(ran, 0);
     assert!(!tmp.path().join(session::TLX_FILE).exists());
     // Also at the ratings: the trial ran, then the flag was set (Ctrl-C at the TLX prompt).
@@ -380,6 +386,9 @@ fn a_real_session_runs_the_participants_schedule_rows() {
         trials.iter().map(|t| &t.folder).collect::<Vec<_>>(),
         schedule[2].iter().map(|t| &t.folder).collect::<Vec<_>>()
     );
-    let err = format!("{:#}", participant_trials(&cfg, "P09").unwrap_err());
+    let err = participant_trials(&cfg, "P09")
+        .unwrap_err()
+        .with_causes()
+        .to_string();
     assert!(err.contains("P09 is not in the schedule"), "{err}");
 }

@@ -8,7 +8,6 @@
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use anyhow::{Context, anyhow};
 use plotters::chart::SeriesAnno;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
@@ -59,7 +58,7 @@ pub(crate) const FILES: [&str; 5] = [
 ];
 
 /// Registers the embedded font (once per process).
-pub(crate) fn register_font() -> anyhow::Result<()> {
+pub(crate) fn register_font() -> crate::Result<()> {
     static DONE: OnceLock<bool> = OnceLock::new();
     let ok = *DONE.get_or_init(|| {
         plotters::style::register_font(FAMILY, FontStyle::Normal, FONT_BYTES).is_ok()
@@ -67,26 +66,26 @@ pub(crate) fn register_font() -> anyhow::Result<()> {
     if ok {
         Ok(())
     } else {
-        Err(anyhow!(
-            "the embedded font assets/fonts/DejaVuSans.ttf could not be loaded"
+        Err(crate::Error::data(
+            "the embedded font assets/fonts/DejaVuSans.ttf",
+            "could not be loaded",
         ))
     }
 }
 
 /// Renders the four panels and the combined figure into `dir`; returns the paths written.
-pub(crate) fn render(dir: &Path, fig: &Figure<'_>) -> anyhow::Result<Vec<PathBuf>> {
+pub(crate) fn render(dir: &Path, fig: &Figure<'_>) -> crate::Result<Vec<PathBuf>> {
     register_font()?;
-    anyhow::ensure!(
-        !fig.samples.is_empty(),
-        "nothing to plot: no assessed frame"
-    );
+    if fig.samples.is_empty() {
+        return Err(crate::Error::data("nothing to plot", "no assessed frame"));
+    }
     let mut written = Vec::with_capacity(FILES.len());
     for (k, name) in FILES[..4].iter().enumerate() {
         let path = dir.join(name);
         {
             let root = BitMapBackend::new(&path, PANEL_PX).into_drawing_area();
-            panel(k, &root, fig).map_err(|e| anyhow!("{e}"))?;
-            root.present().map_err(|e| anyhow!("{e}"))?;
+            panel(k, &root, fig).map_err(|e| plot_error(&path, &e))?;
+            root.present().map_err(|e| plot_error(&path, &e))?;
         }
         written.push(path);
     }
@@ -95,15 +94,23 @@ pub(crate) fn render(dir: &Path, fig: &Figure<'_>) -> anyhow::Result<Vec<PathBuf
         let root = BitMapBackend::new(&path, FIGURE_PX).into_drawing_area();
         let cells = root.split_evenly((2, 2));
         for (k, cell) in cells.iter().enumerate() {
-            panel(k, cell, fig).map_err(|e| anyhow!("{e}"))?;
+            panel(k, cell, fig).map_err(|e| plot_error(&path, &e))?;
         }
-        root.present().map_err(|e| anyhow!("{e}"))?;
+        root.present().map_err(|e| plot_error(&path, &e))?;
     }
     written.push(path);
     for p in &written {
-        std::fs::metadata(p).with_context(|| format!("plot {} was not written", p.display()))?;
+        std::fs::metadata(p).map_err(crate::Error::io("find the plot just written", p))?;
     }
     Ok(written)
+}
+
+/// The [`crate::Error::Plot`] of drawing `path`.
+fn plot_error(path: &Path, e: &dyn std::fmt::Display) -> crate::Error {
+    crate::Error::Plot {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    }
 }
 
 type DrawResult<DB> = Result<(), DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;

@@ -28,7 +28,8 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use anyhow::Context as _;
+use crate::Error;
+use crate::error::ResultExt as _;
 use robot_io::dashboard::DashboardClient;
 use robot_io::emulator::{Emulator, EmulatorConfig, SimBackend};
 use robot_io::rtde_robot::{RtdeRobot, RtdeRobotConfig};
@@ -174,12 +175,15 @@ impl RtdeGuard {
     }
 }
 
-fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+fn runtime() -> crate::Result<tokio::runtime::Runtime> {
     tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
-        .context("cannot start the tokio runtime")
+        .map_err(|source| Error::Thread {
+            name: "tokio runtime",
+            source,
+        })
 }
 
 /// Connects an `RtdeRobot` at `host:port`, sends our control program to `script_port` and
@@ -190,7 +194,7 @@ async fn connect(
     port: u16,
     script_port: u16,
     map: RegisterMap,
-) -> anyhow::Result<RtdeRobot> {
+) -> crate::Result<RtdeRobot> {
     let mut rcfg = RtdeRobotConfig::new(host);
     rcfg.port = port;
     rcfg.registers = map;
@@ -212,10 +216,13 @@ async fn connect(
             return Ok(robot);
         }
     }
-    anyhow::bail!(
-        "the control program never started (runtime state {})",
-        s.runtime_state
-    )
+    Err(Error::RobotNotReady {
+        host: host.to_owned(),
+        reason: format!(
+            "the control program never started (runtime state {})",
+            s.runtime_state
+        ),
+    })
 }
 
 /// Starts the emulator in-process on ephemeral loopback ports with a `SimRobot` at `home_q`,
@@ -223,7 +230,7 @@ async fn connect(
 pub(crate) fn start_emulator(
     home_q: [f64; 6],
     speedup: u32,
-) -> anyhow::Result<(PacedRtde, RtdeGuard)> {
+) -> crate::Result<(PacedRtde, RtdeGuard)> {
     let rt = runtime()?;
     let (emulator, robot) = rt.block_on(async {
         let sim = SimRobot::new(SimConfig {
@@ -256,7 +263,7 @@ pub(crate) fn start_emulator(
             map,
         )
         .await?;
-        anyhow::Ok((emu, robot))
+        Ok::<_, Error>((emu, robot))
     })?;
     let robot = PacedRtde::new(robot, &rt);
     Ok((
@@ -278,7 +285,7 @@ pub(crate) fn connect_ur(
     host: &str,
     ports: UrPorts,
     stop: &AtomicBool,
-) -> anyhow::Result<(PacedRtde, RtdeGuard)> {
+) -> crate::Result<(PacedRtde, RtdeGuard)> {
     let rt = runtime()?;
     rt.block_on(async {
         let mut d = DashboardClient::connect(host, ports.dashboard, Duration::from_secs(3))
@@ -291,12 +298,19 @@ pub(crate) fn connect_ur(
             "UR5e at {host}: robot mode {}, safety status {safety:?}, remote control {remote}",
             robot_io::dashboard::robot_mode_name(mode.0)
         );
-        anyhow::ensure!(
+        let not_ready = |reason: &str| Error::RobotNotReady {
+            host: host.to_owned(),
+            reason: reason.to_owned(),
+        };
+        ensure!(
             remote,
-            "the robot is not in remote control (set it on the teach pendant)"
+            not_ready("not in remote control (set it on the teach pendant)")
         );
-        anyhow::ensure!(safety.is_normal(), "the safety status is not normal");
-        anyhow::Ok(())
+        ensure!(
+            safety.is_normal(),
+            not_ready(&format!("the safety status is {safety:?}, not normal"))
+        );
+        Ok::<_, Error>(())
     })?;
     eprint!(
         "The robot will move. Keep the workspace clear except for the operator. Type `yes` to start: "
@@ -305,11 +319,18 @@ pub(crate) fn connect_ur(
         eprintln!();
         return Err(super::runtime::TrialEnded::before_start(
             "interrupted",
-            anyhow::anyhow!("interrupted at the confirmation prompt; nothing moved"),
+            Error::Interrupted {
+                at: "the confirmation prompt",
+            },
         )
         .into());
     };
-    anyhow::ensure!(line.trim() == "yes", "not confirmed; nothing moved");
+    ensure!(
+        line.trim() == "yes",
+        Error::NotConfirmed {
+            answer: line.trim().to_owned(),
+        }
+    );
     let robot = rt.block_on(connect(
         host,
         ports.rtde,

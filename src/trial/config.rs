@@ -2,8 +2,9 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context as _;
 use serde::Deserialize;
+
+use crate::Error;
 
 /// Highest `cue_rate_hz` [Hz]: the fastest camera mode the front-end runs (and 4× the
 /// assessment's 30 Hz design rate).
@@ -129,8 +130,8 @@ pub const SHIPPED_TOML: &str = include_str!("../../config/trial.toml");
 
 impl TrialConfig {
     /// Parses `text`; relative paths are resolved against `base_dir`.
-    pub fn from_toml_str(text: &str, base_dir: &Path) -> anyhow::Result<TrialConfig> {
-        let mut cfg: TrialConfig = toml::from_str(text).context("parsing the trial config")?;
+    pub fn from_toml_str(text: &str, base_dir: &Path) -> crate::Result<TrialConfig> {
+        let mut cfg: TrialConfig = toml::from_str(text).map_err(Error::toml("the trial config"))?;
         for p in [
             &mut cfg.workspace,
             &mut cfg.controller,
@@ -141,55 +142,78 @@ impl TrialConfig {
         if let Some(a) = cfg.assess.as_mut() {
             *a = base_dir.join(&*a);
         }
-        anyhow::ensure!(
+        ensure!(
             cfg.cue_rate_hz > 0.0 && cfg.cue_rate_hz <= MAX_CUE_RATE_HZ,
-            "cue_rate_hz must be in (0, {MAX_CUE_RATE_HZ}] Hz, got {}",
-            cfg.cue_rate_hz
+            Error::config(
+                "cue_rate_hz",
+                format!(
+                    "must be in (0, {MAX_CUE_RATE_HZ}] Hz, got {}",
+                    cfg.cue_rate_hz
+                )
+            )
         );
-        anyhow::ensure!(
+        ensure!(
             cfg.max_duration_s > 0.0 && cfg.max_duration_s <= MAX_DURATION_S,
-            "max_duration_s must be in (0, {MAX_DURATION_S}] s, got {}",
-            cfg.max_duration_s
+            Error::config(
+                "max_duration_s",
+                format!(
+                    "must be in (0, {MAX_DURATION_S}] s, got {}",
+                    cfg.max_duration_s
+                )
+            )
         );
-        anyhow::ensure!(
+        ensure!(
             (0.0..=MAX_LEAD_TIME_S).contains(&cfg.lead_time_s),
-            "lead_time_s must be in [0, {MAX_LEAD_TIME_S}] s, got {}",
-            cfg.lead_time_s
+            Error::config(
+                "lead_time_s",
+                format!(
+                    "must be in [0, {MAX_LEAD_TIME_S}] s, got {}",
+                    cfg.lead_time_s
+                )
+            )
         );
-        anyhow::ensure!(
+        ensure!(
             cfg.frame.robot_base_origin_m.iter().all(|v| v.is_finite())
                 && cfg.frame.robot_base_yaw_deg.is_finite(),
-            "frame values must be finite"
+            Error::config("frame", "values must be finite")
         );
         let link = cfg.link;
-        anyhow::ensure!(
+        ensure!(
             (0.01..=60.0).contains(&link.lost_after_s),
-            "link.lost_after_s must be in [0.01, 60] s, got {}",
-            link.lost_after_s
+            Error::config(
+                "link.lost_after_s",
+                format!("must be in [0.01, 60] s, got {}", link.lost_after_s)
+            )
         );
-        anyhow::ensure!(
+        ensure!(
             link.resume_within_s > 0.0 && link.resume_within_s <= 3600.0,
-            "link.resume_within_s must be in (0, 3600] s, got {}",
-            link.resume_within_s
+            Error::config(
+                "link.resume_within_s",
+                format!("must be in (0, 3600] s, got {}", link.resume_within_s)
+            )
         );
-        anyhow::ensure!(
+        ensure!(
             (0.1..=3600.0).contains(&cfg.progress.stuck_after_s),
-            "progress.stuck_after_s must be in [0.1, 3600] s, got {}",
-            cfg.progress.stuck_after_s
+            Error::config(
+                "progress.stuck_after_s",
+                format!(
+                    "must be in [0.1, 3600] s, got {}",
+                    cfg.progress.stuck_after_s
+                )
+            )
         );
         Ok(cfg)
     }
 
     /// Reads a config file.
-    pub fn from_file(path: &Path) -> anyhow::Result<TrialConfig> {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    pub fn from_file(path: &Path) -> crate::Result<TrialConfig> {
+        let text = std::fs::read_to_string(path).map_err(Error::io("read", path))?;
         let dir = path.parent().unwrap_or(Path::new("."));
-        Self::from_toml_str(&text, dir).with_context(|| format!("in {}", path.display()))
+        Self::from_toml_str(&text, dir).map_err(|e| e.in_file(path))
     }
 
     /// The shipped config, with paths under this repository's `config/`.
-    pub fn shipped() -> anyhow::Result<TrialConfig> {
+    pub fn shipped() -> crate::Result<TrialConfig> {
         Self::from_toml_str(
             SHIPPED_TOML,
             &Path::new(env!("CARGO_MANIFEST_DIR")).join("config"),
@@ -207,7 +231,7 @@ pub(crate) fn check_task_poses(
     task: &adapt::task::TaskConfig,
     workspace: &safety::WorkspaceBox,
     file: &Path,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     for (pose, q) in [
         ("poses.home", &task.home_q_rad),
         ("poses.pick", &task.pick_q_rad),
@@ -220,21 +244,18 @@ pub(crate) fn check_task_poses(
                 safety::points::ArmPoint::Elbow => "elbow",
             };
             let (lo, hi) = (workspace.min_m(), workspace.max_m());
-            anyhow::ensure!(
+            ensure!(
                 workspace.contains(&p),
-                "{}: `{pose}` puts the {name} at ({:.3}, {:.3}, {:.3}) m (base frame), outside \
-                 the safety supervisor's workspace box [{}, {}] × [{}, {}] × [{}, {}] m \
-                 (SAF-REQ-006): every motion to it would be stopped",
-                file.display(),
-                p[0],
-                p[1],
-                p[2],
-                lo[0],
-                hi[0],
-                lo[1],
-                hi[1],
-                lo[2],
-                hi[2]
+                Error::config(
+                    pose,
+                    format!(
+                        "puts the {name} at ({:.3}, {:.3}, {:.3}) m (base frame), outside the \
+                         safety supervisor's workspace box [{}, {}] × [{}, {}] × [{}, {}] m \
+                         (SAF-REQ-006): every motion to it would be stopped",
+                        p[0], p[1], p[2], lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]
+                    )
+                )
+                .in_file(file)
             );
         }
     }
@@ -285,7 +306,7 @@ mod tests {
             ("lead_time_s", "1e20", "600"),
             ("cue_rate_hz", "1e20", "120"),
         ] {
-            let e = format!("{:#}", with(key, bad).unwrap_err());
+            let e = with(key, bad).unwrap_err().with_causes().to_string();
             assert!(e.contains(key) && e.contains(bound), "{key} = {bad}: {e}");
         }
     }
@@ -309,10 +330,10 @@ mod tests {
         let mut spec = crate::trial::runtime::test_spec(crate::trial::operator::Level::L1, 1, 2.0);
         spec.config.controller = controller_with_pick_z(tmp.path(), -0.05);
         let out = tmp.path().join("run");
-        let e = format!(
-            "{:#}",
-            crate::trial::run_simulated(&spec, &out, false).unwrap_err()
-        );
+        let e = crate::trial::run_simulated(&spec, &out, false)
+            .unwrap_err()
+            .with_causes()
+            .to_string();
         assert!(
             e.contains("poses.pick") && e.contains("TCP") && e.contains("workspace box"),
             "{e}"
@@ -335,6 +356,7 @@ mod tests {
         assert!((wrist[2] + 0.2297).abs() < 1e-3, "{wrist:?}");
         let e = check_task_poses(&task, &box_, file)
             .unwrap_err()
+            .with_causes()
             .to_string();
         assert!(
             e.contains("`poses.handover`") && e.contains("handover.toml"),

@@ -110,7 +110,7 @@ impl<R: TrialRobot> ControlCycle<R> {
         &mut self,
         input: &CycleInput<'_>,
         log: &mut L,
-    ) -> anyhow::Result<CycleOutput> {
+    ) -> crate::Result<CycleOutput> {
         let t = input.t_s;
         let perception_age_s = (t - input.cue_t_s).max(0.0);
         let view = OperatorView {

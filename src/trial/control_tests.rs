@@ -230,14 +230,14 @@ impl CueLink<TrialLog> for SilentCues {
         &mut self,
         robot: &RobotSnapshot,
         _log: &mut TrialLog,
-    ) -> anyhow::Result<CueExchange> {
+    ) -> crate::Result<CueExchange> {
         Ok(if robot.t_s >= 1.0 {
             CueExchange::Ended("completed")
         } else {
             CueExchange::Nothing
         })
     }
-    fn released(&mut self, _t_s: f64, _log: &mut TrialLog) -> anyhow::Result<()> {
+    fn released(&mut self, _t_s: f64, _log: &mut TrialLog) -> crate::Result<()> {
         Ok(())
     }
     fn link_down(&mut self, _down_s: Option<f64>) {}

@@ -35,9 +35,9 @@ pub(crate) trait OperatorSource {
         robot: &RobotView,
         frame: &mut CueFrame,
         log: &mut TrialLog,
-    ) -> anyhow::Result<Option<f64>>;
+    ) -> crate::Result<Option<f64>>;
     /// The robot released the part to the operator at `t_s` [s].
-    fn released(&mut self, _t_s: f64, _log: &mut TrialLog) -> anyhow::Result<()> {
+    fn released(&mut self, _t_s: f64, _log: &mut TrialLog) -> crate::Result<()> {
         Ok(())
     }
     /// Whether the trial's work is done, after `done` of `handovers` handovers.
@@ -45,7 +45,7 @@ pub(crate) trait OperatorSource {
         done >= handovers
     }
     /// Ends the source (a camera: joins its thread and reports its failure, if any).
-    fn finish(self: Box<Self>) -> anyhow::Result<()> {
+    fn finish(self: Box<Self>) -> crate::Result<()> {
         Ok(())
     }
 }
@@ -63,14 +63,14 @@ impl OperatorSource for SimulatedOperator {
         robot: &RobotView,
         frame: &mut CueFrame,
         log: &mut TrialLog,
-    ) -> anyhow::Result<Option<f64>> {
+    ) -> crate::Result<Option<f64>> {
         self.step(tc, robot, frame);
         for e in self.events() {
             log.event(tc, e)?;
         }
         Ok(Some(tc))
     }
-    fn released(&mut self, t_s: f64, log: &mut TrialLog) -> anyhow::Result<()> {
+    fn released(&mut self, t_s: f64, log: &mut TrialLog) -> crate::Result<()> {
         self.release_confirmed();
         for e in self.events() {
             log.event(t_s, e)?;
@@ -95,7 +95,7 @@ impl OperatorSource for RecordedCues {
         _robot: &RobotView,
         frame: &mut CueFrame,
         _log: &mut TrialLog,
-    ) -> anyhow::Result<Option<f64>> {
+    ) -> crate::Result<Option<f64>> {
         Ok(if self.ended(tc) {
             None
         } else {
@@ -118,10 +118,10 @@ impl OperatorSource for super::live::LiveCues {
         _robot: &RobotView,
         frame: &mut CueFrame,
         _log: &mut TrialLog,
-    ) -> anyhow::Result<Option<f64>> {
+    ) -> crate::Result<Option<f64>> {
         Ok(self.hold(tc, frame))
     }
-    fn finish(self: Box<Self>) -> anyhow::Result<()> {
+    fn finish(self: Box<Self>) -> crate::Result<()> {
         super::live::LiveCues::finish(*self)
     }
 }
@@ -173,7 +173,7 @@ impl CueCycle {
     }
 
     /// Ends the operator source (see [`OperatorSource::finish`]).
-    pub(crate) fn finish(self) -> anyhow::Result<()> {
+    pub(crate) fn finish(self) -> crate::Result<()> {
         self.source.finish()
     }
 
@@ -186,7 +186,7 @@ impl CueCycle {
         robot: RobotContext,
         phase: Phase,
         log: &mut TrialLog,
-    ) -> anyhow::Result<Option<CueOutput>> {
+    ) -> crate::Result<Option<CueOutput>> {
         let Some(cue_t) = self.source.frame(tc, view, &mut self.frame, log)? else {
             return Ok(None);
         };

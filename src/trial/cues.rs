@@ -16,7 +16,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context as _;
+use crate::error::ResultExt as _;
 use assess::CueFrame;
 
 /// Where a trial's operator cues come from.
@@ -58,12 +58,12 @@ pub(crate) struct RecordedCues {
 
 impl RecordedCues {
     /// Reads `path` (`assess::io::cue_csv::read`); fails when it holds no frame.
-    pub(crate) fn load(path: &Path) -> anyhow::Result<Self> {
+    pub(crate) fn load(path: &Path) -> crate::Result<Self> {
         let frames = assess::io::cue_csv::read(path)
             .with_context(|| format!("reading the cue file {}", path.display()))?;
-        let first = frames
-            .first()
-            .with_context(|| format!("the cue file {} holds no frame", path.display()))?;
+        let first = frames.first().ok_or_else(|| {
+            crate::Error::data(format!("the cue file {}", path.display()), "holds no frame")
+        })?;
         let name = path.file_name().map_or_else(
             || path.display().to_string(),
             |n| n.to_string_lossy().into(),

@@ -26,7 +26,8 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use anyhow::{Context as _, bail};
+use crate::Error;
+use crate::error::ResultExt as _;
 use assess::CueFrame;
 
 use super::cues::CameraSpec;
@@ -72,7 +73,7 @@ struct Shared {
 #[derive(Debug)]
 pub(crate) struct LiveCues {
     shared: Arc<Shared>,
-    thread: Option<JoinHandle<anyhow::Result<()>>>,
+    thread: Option<JoinHandle<crate::Result<()>>>,
     label: String,
     /// trial time = camera time + offset [s].
     offset: Option<f64>,
@@ -84,11 +85,10 @@ pub(crate) struct LiveCues {
 impl LiveCues {
     /// Starts the perception thread on `spec`, writing `landmarks.csv` into `dir` (created),
     /// and waits for the first frame. Fails with the thread's error (no camera, no models, …).
-    pub(crate) fn start(spec: &CameraSpec, dir: &Path) -> anyhow::Result<Self> {
+    pub(crate) fn start(spec: &CameraSpec, dir: &Path) -> crate::Result<Self> {
         // A failed start leaves no run folder behind.
         let created = !dir.exists();
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("cannot create the run folder {}", dir.display()))?;
+        std::fs::create_dir_all(dir).map_err(Error::io("create the run folder", dir))?;
         let result = Self::start_in(spec, dir);
         if result.is_err() && created {
             let _ = std::fs::remove_dir_all(dir);
@@ -96,7 +96,7 @@ impl LiveCues {
         result
     }
 
-    fn start_in(spec: &CameraSpec, dir: &Path) -> anyhow::Result<Self> {
+    fn start_in(spec: &CameraSpec, dir: &Path) -> crate::Result<Self> {
         let shared = Arc::new(Shared::default());
         let (described_tx, described_rx) = std::sync::mpsc::sync_channel::<String>(1);
         let thread = {
@@ -110,7 +110,10 @@ impl LiveCues {
                         perceive(&spec, &landmarks, &shared, &described_tx)
                     })
                 })
-                .context("cannot start the perception thread")?
+                .map_err(|source| Error::Thread {
+                    name: "perception thread",
+                    source,
+                })?
         };
         let mut live = Self {
             shared,
@@ -140,10 +143,10 @@ impl LiveCues {
         };
         if !ready {
             live.stop_thread()?;
-            bail!(
-                "the camera gave no frame within {} s",
-                FIRST_FRAME_TIMEOUT.as_secs()
-            );
+            return Err(Error::Camera {
+                camera: "the camera".into(),
+                reason: format!("gave no frame within {} s", FIRST_FRAME_TIMEOUT.as_secs()),
+            });
         }
         let described = described_rx.try_recv().unwrap_or_else(|_| "camera".into());
         live.label = format!("camera:{described}");
@@ -186,12 +189,12 @@ impl LiveCues {
         Some(*t)
     }
 
-    fn stop_thread(&mut self) -> anyhow::Result<()> {
+    fn stop_thread(&mut self) -> crate::Result<()> {
         self.shared.stop.store(true, Ordering::Relaxed);
         match self.thread.take() {
             Some(handle) => match handle.join() {
                 Ok(result) => result,
-                Err(_) => bail!("the perception thread panicked"),
+                Err(p) => Err(Error::panic("the perception thread", p.as_ref())),
             },
             None => Ok(()),
         }
@@ -199,7 +202,7 @@ impl LiveCues {
 
     /// Stops the perception thread and returns its outcome (an error if the camera or the
     /// inference failed); the landmark file and any stored video are closed.
-    pub(crate) fn finish(mut self) -> anyhow::Result<()> {
+    pub(crate) fn finish(mut self) -> crate::Result<()> {
         self.stop_thread()
     }
 }
@@ -215,15 +218,9 @@ impl Drop for LiveCues {
 /// runtime's exit path stops the robot and finishes the logs (as `error`, with this error from
 /// [`LiveCues::finish`]) instead of holding the last frame until the supervisor's perception
 /// staleness stop.
-fn guarded(shared: &Shared, body: impl FnOnce() -> anyhow::Result<()>) -> anyhow::Result<()> {
-    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(body)).unwrap_or_else(|p| {
-        let msg = p
-            .downcast_ref::<&str>()
-            .copied()
-            .or_else(|| p.downcast_ref::<String>().map(String::as_str))
-            .unwrap_or("(no message)");
-        Err(anyhow::anyhow!("the perception thread panicked: {msg}"))
-    });
+fn guarded(shared: &Shared, body: impl FnOnce() -> crate::Result<()>) -> crate::Result<()> {
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(body))
+        .unwrap_or_else(|p| Err(Error::panic("the perception thread", p.as_ref())));
     let mut slot = shared.slot.lock().unwrap_or_else(|e| e.into_inner());
     slot.done = true;
     shared.changed.notify_all();
@@ -237,15 +234,16 @@ fn perceive(
     landmarks_path: &Path,
     shared: &Shared,
     described: &std::sync::mpsc::SyncSender<String>,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let mut opened = open_source(&spec.input, &spec.camera, None)?;
     if spec.require_depth && !opened.source.has_depth() {
-        bail!(
-            "{} has no depth: with a real robot the operator's positions drive separation \
-             monitoring, and 2-D-only positions (estimated from assumed body sizes) are too \
-             rough for it; use a RealSense camera",
-            opened.source.describe()
-        );
+        return Err(Error::Camera {
+            camera: opened.source.describe(),
+            reason: "has no depth: with a real robot the operator's positions drive separation \
+                     monitoring, and 2-D-only positions (estimated from assumed body sizes) are \
+                     too rough for it; use a RealSense camera"
+                .into(),
+        });
     }
     let extrinsics = load_extrinsics(&spec.camera)?;
     let name = opened.source.describe();
@@ -309,7 +307,7 @@ mod tests {
             std::thread::spawn(move || guarded(&shared, || panic!("model file truncated")))
         };
         let result = thread.join().expect("the thread itself does not panic");
-        let e = format!("{:#}", result.unwrap_err());
+        let e = result.unwrap_err().with_causes().to_string();
         assert!(e.contains("panicked: model file truncated"), "{e}");
         assert!(
             shared.slot.lock().unwrap().done,
@@ -368,7 +366,7 @@ mod tests {
             &mut |_| {},
         )
         .unwrap_err();
-        let e = format!("{e:#}");
+        let e = e.with_causes().to_string();
         assert!(e.contains("has no depth"), "{e}");
         assert!(!dir.path().join("run").exists());
     }
@@ -547,7 +545,7 @@ mod tests {
             &mut |_| {},
         )
         .unwrap_err();
-        let e = format!("{e:#}");
+        let e = e.with_causes().to_string();
         assert!(e.contains("cannot open webcam 57 (/dev/video57)"), "{e}");
         // No trial was run, and no run folder is left.
         assert!(!dir.path().join("run").exists());

@@ -65,7 +65,7 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, anyhow};
+use crate::Error;
 use robot_io::trace::{STATE_FIELD_NAMES, TraceWriter, WriteOptions, state_to_row};
 use robot_io::{JointCommand, RobotState};
 use safety::Verdict;
@@ -193,31 +193,31 @@ enum HotRecord {
 /// copies a `Copy` record; none allocates or does I/O.
 pub(crate) trait ControlSink {
     /// See [`TrialLog::robot_state`].
-    fn robot_state(&mut self, t_s: f64, state: &RobotState) -> anyhow::Result<()>;
+    fn robot_state(&mut self, t_s: f64, state: &RobotState) -> crate::Result<()>;
     /// See [`TrialLog::command`].
-    fn command(&mut self, t_s: f64, cmd: &JointCommand, verdict: &Verdict) -> anyhow::Result<()>;
+    fn command(&mut self, t_s: f64, cmd: &JointCommand, verdict: &Verdict) -> crate::Result<()>;
     /// See [`TrialLog::cycle`].
-    fn cycle(&mut self, t_s: f64, rec: &CycleRecord) -> anyhow::Result<()>;
+    fn cycle(&mut self, t_s: f64, rec: &CycleRecord) -> crate::Result<()>;
     /// See [`TrialLog::human_distance`].
-    fn human_distance(&mut self, t_s: f64, min_distance_m: Option<f64>) -> anyhow::Result<()>;
+    fn human_distance(&mut self, t_s: f64, min_distance_m: Option<f64>) -> crate::Result<()>;
     /// See [`TrialLog::event`].
-    fn event(&mut self, t_s: f64, event: &TrialEvent) -> anyhow::Result<()>;
+    fn event(&mut self, t_s: f64, event: &TrialEvent) -> crate::Result<()>;
 }
 
 impl ControlSink for TrialLog {
-    fn robot_state(&mut self, t_s: f64, state: &RobotState) -> anyhow::Result<()> {
+    fn robot_state(&mut self, t_s: f64, state: &RobotState) -> crate::Result<()> {
         TrialLog::robot_state(self, t_s, state)
     }
-    fn command(&mut self, t_s: f64, cmd: &JointCommand, verdict: &Verdict) -> anyhow::Result<()> {
+    fn command(&mut self, t_s: f64, cmd: &JointCommand, verdict: &Verdict) -> crate::Result<()> {
         TrialLog::command(self, t_s, cmd, verdict)
     }
-    fn cycle(&mut self, t_s: f64, rec: &CycleRecord) -> anyhow::Result<()> {
+    fn cycle(&mut self, t_s: f64, rec: &CycleRecord) -> crate::Result<()> {
         TrialLog::cycle(self, t_s, rec)
     }
-    fn human_distance(&mut self, t_s: f64, min_distance_m: Option<f64>) -> anyhow::Result<()> {
+    fn human_distance(&mut self, t_s: f64, min_distance_m: Option<f64>) -> crate::Result<()> {
         TrialLog::human_distance(self, t_s, min_distance_m)
     }
-    fn event(&mut self, t_s: f64, event: &TrialEvent) -> anyhow::Result<()> {
+    fn event(&mut self, t_s: f64, event: &TrialEvent) -> crate::Result<()> {
         TrialLog::event(self, t_s, event)
     }
 }
@@ -251,7 +251,7 @@ impl ControlLog {
         )
     }
 
-    fn push(&mut self, rec: HotRecord) -> anyhow::Result<()> {
+    fn push(&mut self, rec: HotRecord) -> crate::Result<()> {
         if self.producer.push(rec).is_err() {
             self.dropped
                 .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -261,19 +261,19 @@ impl ControlLog {
 }
 
 impl ControlSink for ControlLog {
-    fn robot_state(&mut self, t_s: f64, state: &RobotState) -> anyhow::Result<()> {
+    fn robot_state(&mut self, t_s: f64, state: &RobotState) -> crate::Result<()> {
         self.push(HotRecord::State(t_s, *state))
     }
-    fn command(&mut self, t_s: f64, cmd: &JointCommand, verdict: &Verdict) -> anyhow::Result<()> {
+    fn command(&mut self, t_s: f64, cmd: &JointCommand, verdict: &Verdict) -> crate::Result<()> {
         self.push(HotRecord::Command(t_s, *cmd, *verdict))
     }
-    fn cycle(&mut self, t_s: f64, rec: &CycleRecord) -> anyhow::Result<()> {
+    fn cycle(&mut self, t_s: f64, rec: &CycleRecord) -> crate::Result<()> {
         self.push(HotRecord::Cycle(t_s, *rec, None))
     }
-    fn human_distance(&mut self, t_s: f64, min_distance_m: Option<f64>) -> anyhow::Result<()> {
+    fn human_distance(&mut self, t_s: f64, min_distance_m: Option<f64>) -> crate::Result<()> {
         self.push(HotRecord::Distance(t_s, min_distance_m))
     }
-    fn event(&mut self, t_s: f64, event: &TrialEvent) -> anyhow::Result<()> {
+    fn event(&mut self, t_s: f64, event: &TrialEvent) -> crate::Result<()> {
         self.push(HotRecord::Event(t_s, *event))
     }
 }
@@ -420,31 +420,31 @@ fn ns(t_s: f64) -> u64 {
 impl TrialLog {
     /// Creates `dir` (if needed) and its log files, and writes the channel schemas and the
     /// trial's identity.
-    pub(crate) fn create(
-        dir: &Path,
-        meta: &TrialMeta,
-        options: LogOptions,
-    ) -> anyhow::Result<Self> {
-        anyhow::ensure!(
+    pub(crate) fn create(dir: &Path, meta: &TrialMeta, options: LogOptions) -> crate::Result<Self> {
+        ensure!(
             options.chunk_period_s > 0.0 && options.ring_capacity > 0,
-            "log options: chunk_period_s must be > 0 and ring_capacity ≥ 1"
+            Error::config(
+                "log options",
+                "need chunk_period_s > 0 and ring_capacity ≥ 1"
+            )
         );
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("cannot create the run folder {}", dir.display()))?;
+        std::fs::create_dir_all(dir).map_err(Error::io("create the run folder", dir))?;
         // A run folder is never reused (issue 10): another trial's log in it is refused, and
         // the files are created exclusively, so two trials cannot share one.
         for name in [SUMMARY_FILE, super::report::HTML_FILE] {
-            anyhow::ensure!(
+            ensure!(
                 !dir.join(name).exists(),
-                "{} holds another trial's log ({name}); refusing to overwrite it",
-                dir.display()
+                Error::data(
+                    dir.display(),
+                    format!("holds another trial's log ({name}); refusing to overwrite it")
+                )
             );
         }
         let open = |name: &str| {
             let p = dir.join(name);
             File::create_new(&p)
                 .map(BufWriter::new)
-                .with_context(|| format!("cannot create {} (another trial's log?)", p.display()))
+                .map_err(Error::io("create (another trial's log?)", &p))
         };
         let write_options = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
@@ -454,20 +454,26 @@ impl TrialLog {
             .chunk_size(Some(4 << 20));
         let mut mcap = write_options
             .create(open(MCAP_FILE)?)
-            .context("cannot start trial.mcap")?;
+            .map_err(Error::mcap("start", &dir.join(MCAP_FILE)))?;
         let mut channels = [0u16; mcap_out::CHANNELS.len()];
         for (id, c) in channels.iter_mut().zip(mcap_out::CHANNELS) {
-            let schema = mcap.add_schema(c.schema_name, "jsonschema", c.schema.as_bytes())?;
-            *id = mcap.add_channel(schema, c.topic, "json", &BTreeMap::new())?;
+            let schema = mcap
+                .add_schema(c.schema_name, "jsonschema", c.schema.as_bytes())
+                .map_err(Error::mcap("write the schemas into", &dir.join(MCAP_FILE)))?;
+            *id = mcap
+                .add_channel(schema, c.topic, "json", &BTreeMap::new())
+                .map_err(Error::mcap("write the channels into", &dir.join(MCAP_FILE)))?;
         }
-        let indicators =
-            IndicatorTable::new(open(INDICATORS_FILE)?).context("cannot start indicators.csv")?;
+        let indicators = IndicatorTable::new(open(INDICATORS_FILE)?)
+            .map_err(Error::csv("start", &dir.join(INDICATORS_FILE)))?;
         let robot = TraceWriter::new(
             open(ROBOT_FILE)?,
             &STATE_FIELD_NAMES,
             &WriteOptions::ur_rtde(),
         )
-        .context("cannot start robot.csv")?;
+        .map_err(|e| {
+            Error::from(e).context(format!("cannot start {}", dir.join(ROBOT_FILE).display()))
+        })?;
         let mut log = Self {
             dir: dir.to_path_buf(),
             meta: meta.clone(),
@@ -490,19 +496,22 @@ impl TrialLog {
             synchronous_drains: 0,
             dropped_records: 0,
         };
-        let meta_json = serde_json::to_vec(meta)?;
+        let meta_json =
+            serde_json::to_vec(meta).map_err(Error::json("write", "the trial's identity"))?;
         log.write(ch::META, 0.0, &meta_json)?;
         // The schemas and the identity reach the file at once.
-        log.mcap.flush()?;
+        log.mcap
+            .flush()
+            .map_err(Error::mcap("flush", &log.dir.join(MCAP_FILE)))?;
         log.next_chunk_t = log.options.chunk_period_s;
         Ok(log)
     }
 
     /// Writes one message on channel `c` at trial time `t_s` [s].
-    fn write(&mut self, c: usize, t_s: f64, data: &[u8]) -> anyhow::Result<()> {
+    fn write(&mut self, c: usize, t_s: f64, data: &[u8]) -> crate::Result<()> {
         let (Some(&channel_id), Some(seq)) = (self.channels.get(c), self.sequences.get_mut(c))
         else {
-            return Err(anyhow!("no channel {c}"));
+            return Err(Error::data(MCAP_FILE, format!("no channel {c}")));
         };
         *seq = seq.wrapping_add(1);
         let header = mcap::records::MessageHeader {
@@ -511,25 +520,29 @@ impl TrialLog {
             log_time: ns(t_s),
             publish_time: ns(t_s),
         };
-        self.mcap.write_to_known_channel(&header, data)?;
+        self.mcap
+            .write_to_known_channel(&header, data)
+            .map_err(Error::mcap("write", &self.dir.join(MCAP_FILE)))?;
         Ok(())
     }
 
     /// Writes a `serde_json` value on channel `c`.
-    fn write_value(&mut self, c: usize, t_s: f64, v: &serde_json::Value) -> anyhow::Result<()> {
+    fn write_value(&mut self, c: usize, t_s: f64, v: &serde_json::Value) -> crate::Result<()> {
         let mut buf = std::mem::take(&mut self.buf);
         buf.clear();
         let res = serde_json::to_writer(&mut buf, v)
-            .map_err(anyhow::Error::from)
+            .map_err(Error::json("write", "a log message"))
             .and_then(|()| self.write(c, t_s, &buf));
         self.buf = buf;
         res
     }
 
     /// Closes the current chunk and flushes every file once `t_s` passes the chunk period.
-    fn maybe_close_chunk(&mut self, t_s: f64) -> anyhow::Result<()> {
+    fn maybe_close_chunk(&mut self, t_s: f64) -> crate::Result<()> {
         if t_s >= self.next_chunk_t {
-            self.mcap.flush()?;
+            self.mcap
+                .flush()
+                .map_err(Error::mcap("flush", &self.dir.join(MCAP_FILE)))?;
             self.robot.flush()?;
             while self.next_chunk_t <= t_s {
                 self.next_chunk_t += self.options.chunk_period_s;
@@ -539,7 +552,7 @@ impl TrialLog {
     }
 
     /// Formats and writes every record in the ring.
-    fn drain(&mut self) -> anyhow::Result<()> {
+    fn drain(&mut self) -> crate::Result<()> {
         let ring = std::mem::take(&mut self.ring);
         let mut res = Ok(());
         for rec in &ring {
@@ -553,9 +566,9 @@ impl TrialLog {
         res
     }
 
-    fn write_hot(&mut self, rec: &HotRecord) -> anyhow::Result<()> {
+    fn write_hot(&mut self, rec: &HotRecord) -> crate::Result<()> {
         let mut buf = std::mem::take(&mut self.buf);
-        let res = (|| -> anyhow::Result<()> {
+        let res = (|| -> crate::Result<()> {
             match *rec {
                 HotRecord::State(t, ref s) => {
                     mcap_out::robot_state_json(&mut buf, t, s);
@@ -607,7 +620,7 @@ impl TrialLog {
     }
 
     /// Queues a control-rate record; drains first if the ring is full.
-    fn push(&mut self, rec: HotRecord) -> anyhow::Result<()> {
+    fn push(&mut self, rec: HotRecord) -> crate::Result<()> {
         if self.ring.len() == self.ring.capacity() {
             self.synchronous_drains += 1;
             self.drain()?;
@@ -617,7 +630,7 @@ impl TrialLog {
     }
 
     /// Logs the cue frame given to the assessor at trial time `t_s` [s] (camera rate).
-    pub(crate) fn cues(&mut self, t_s: f64, frame: &assess::CueFrame) -> anyhow::Result<()> {
+    pub(crate) fn cues(&mut self, t_s: f64, frame: &assess::CueFrame) -> crate::Result<()> {
         self.drain()?;
         self.write_value(ch::CUES, t_s, &mcap_out::cues_value(t_s, frame))?;
         self.maybe_close_chunk(t_s)
@@ -630,12 +643,12 @@ impl TrialLog {
         t_s: f64,
         a: &assess::Assessment,
         ws: &assess::Workspace,
-    ) -> anyhow::Result<()> {
+    ) -> crate::Result<()> {
         self.drain()?;
         self.write_value(ch::ASSESSMENT, t_s, &mcap_out::assessment_value(t_s, a, ws))?;
         self.indicators
             .write(ws, a)
-            .context("cannot write indicators.csv")?;
+            .map_err(Error::csv("write", &self.dir.join(INDICATORS_FILE)))?;
         self.recorded.frames.push(FrameRecord::of(a));
         let w = &a.windowed;
         self.recorded.indicators.push(IndicatorRecord {
@@ -647,9 +660,11 @@ impl TrialLog {
     }
 
     /// Logs the policy's adaptation (camera rate).
-    pub(crate) fn adaptation(&mut self, t_s: f64, a: &policies::Adaptation) -> anyhow::Result<()> {
+    pub(crate) fn adaptation(&mut self, t_s: f64, a: &policies::Adaptation) -> crate::Result<()> {
         self.drain()?;
-        self.write_value(ch::ADAPTATION, t_s, &mcap_out::adaptation_value(t_s, a)?)?;
+        let value =
+            mcap_out::adaptation_value(t_s, a).map_err(Error::json("write", "the adaptation"))?;
+        self.write_value(ch::ADAPTATION, t_s, &value)?;
         self.recorded.adaptations.push(AdaptationRecord {
             t_s,
             speed_scale: a.speed_scale.get(),
@@ -667,7 +682,7 @@ impl TrialLog {
     /// allocation, no I/O (unless the ring is full). The control-rate methods below and
     /// [`TrialLog::absorb`] (records from a [`ControlLog`]) both come here, so a record has the
     /// same effect whichever way it arrives.
-    fn ingest(&mut self, rec: HotRecord) -> anyhow::Result<()> {
+    fn ingest(&mut self, rec: HotRecord) -> crate::Result<()> {
         match rec {
             HotRecord::State(t_s, ref state) => {
                 self.motion.on_state(t_s, state);
@@ -698,7 +713,7 @@ impl TrialLog {
 
     /// Takes every record a [`ControlLog`] queued so far (in order), as if its calls had been
     /// made here. The cue thread calls it before each of its own log calls and at the end.
-    pub(crate) fn absorb(&mut self, from: &mut ControlLogReader) -> anyhow::Result<()> {
+    pub(crate) fn absorb(&mut self, from: &mut ControlLogReader) -> crate::Result<()> {
         self.dropped_records += from.dropped.swap(0, std::sync::atomic::Ordering::Relaxed);
         while let Ok(rec) = from.consumer.pop() {
             self.ingest(rec)?;
@@ -709,7 +724,7 @@ impl TrialLog {
     /// Logs a robot state (control rate; decimated to 100 Hz unless
     /// [`LogOptions::robot_full_rate`]; every state goes to the motion metrics). Copies into
     /// the ring: no allocation, no I/O (unless the ring is full).
-    pub(crate) fn robot_state(&mut self, t_s: f64, state: &RobotState) -> anyhow::Result<()> {
+    pub(crate) fn robot_state(&mut self, t_s: f64, state: &RobotState) -> crate::Result<()> {
         self.ingest(HotRecord::State(t_s, *state))
     }
 
@@ -720,14 +735,14 @@ impl TrialLog {
         t_s: f64,
         cmd: &JointCommand,
         verdict: &Verdict,
-    ) -> anyhow::Result<()> {
+    ) -> crate::Result<()> {
         self.ingest(HotRecord::Command(t_s, *cmd, *verdict))
     }
 
     /// Logs what the control cycle at `t_s` [s] reports about itself (control rate; every
     /// cycle, `/robot/cycle`, after [`TrialLog::robot_state`] of the same cycle so the record
     /// carries its executed jerk). Copies into the ring.
-    pub(crate) fn cycle(&mut self, t_s: f64, rec: &CycleRecord) -> anyhow::Result<()> {
+    pub(crate) fn cycle(&mut self, t_s: f64, rec: &CycleRecord) -> crate::Result<()> {
         self.ingest(HotRecord::Cycle(t_s, *rec, None))
     }
 
@@ -737,28 +752,31 @@ impl TrialLog {
         &mut self,
         t_s: f64,
         min_distance_m: Option<f64>,
-    ) -> anyhow::Result<()> {
+    ) -> crate::Result<()> {
         self.ingest(HotRecord::Distance(t_s, min_distance_m))
     }
 
     /// Logs a trial event (any rate; copies into the ring). `Safety` events go to
     /// `/safety/events`, the others to `/task/events`.
-    pub(crate) fn event(&mut self, t_s: f64, event: &TrialEvent) -> anyhow::Result<()> {
+    pub(crate) fn event(&mut self, t_s: f64, event: &TrialEvent) -> crate::Result<()> {
         self.ingest(HotRecord::Event(t_s, *event))
     }
 
     /// Writes out what the control-rate calls queued in the ring (what every camera-rate call
     /// does first).
     #[cfg(test)]
-    pub(crate) fn drain_ring(&mut self) -> anyhow::Result<()> {
+    pub(crate) fn drain_ring(&mut self) -> crate::Result<()> {
         self.drain()
     }
 
     /// Drains the ring, closes every file, writes `summary.json` and the report.
-    pub(crate) fn finish(mut self) -> anyhow::Result<TrialFiles> {
+    pub(crate) fn finish(mut self) -> crate::Result<TrialFiles> {
         self.drain()?;
         self.motion.finish();
-        let mcap_summary = self.mcap.finish().context("cannot finish trial.mcap")?;
+        let mcap_summary = self
+            .mcap
+            .finish()
+            .map_err(Error::mcap("finish", &self.dir.join(MCAP_FILE)))?;
         let mut message_counts = BTreeMap::new();
         if let Some(stats) = &mcap_summary.stats {
             for (id, n) in &stats.channel_message_counts {
@@ -781,18 +799,25 @@ impl TrialLog {
             ..
         } = self;
         use std::io::Write;
-        mcap.into_inner().flush()?;
+        mcap.into_inner()
+            .flush()
+            .map_err(Error::io("flush", &dir.join(MCAP_FILE)))?;
+        let indicators_csv = dir.join(INDICATORS_FILE);
         indicators
             .finish()
-            .context("cannot finish indicators.csv")?
-            .flush()?;
+            .map_err(Error::io("finish", &indicators_csv))?
+            .flush()
+            .map_err(Error::io("flush", &indicators_csv))?;
         robot.flush()?;
-        robot.into_inner().flush()?;
+        robot
+            .into_inner()
+            .flush()
+            .map_err(Error::io("flush", &dir.join(ROBOT_FILE)))?;
 
         let summary = summary::compute(&meta, &recorded.frames, &recorded.events, &motion);
         let summary_json = dir.join(SUMMARY_FILE);
-        std::fs::write(&summary_json, summary::to_json(&summary)?)
-            .with_context(|| format!("cannot write {}", summary_json.display()))?;
+        let json = summary::to_json(&summary).map_err(Error::json("write", SUMMARY_FILE))?;
+        std::fs::write(&summary_json, json).map_err(Error::io("write", &summary_json))?;
 
         let (report_html, plots) = if options.write_report {
             let r = report::write(&dir, &meta, &options, &recorded, &summary)?;
@@ -820,10 +845,11 @@ impl TrialLog {
 /// Reads every message of an MCAP file that a reader can reach: the whole file if it is
 /// complete, else everything up to the last complete chunk (a damaged tail is ignored).
 /// Returns (topic, log time [ns], JSON text) per message, and whether the tail was damaged.
-pub(crate) fn read_mcap_messages(bytes: &[u8]) -> anyhow::Result<(Vec<ReadMessage>, bool)> {
+pub(crate) fn read_mcap_messages(bytes: &[u8]) -> crate::Result<(Vec<ReadMessage>, bool)> {
     use std::borrow::Cow;
     let stream =
-        mcap::MessageStream::new_with_options(bytes, mcap::read::Options::IgnoreEndMagic.into())?;
+        mcap::MessageStream::new_with_options(bytes, mcap::read::Options::IgnoreEndMagic.into())
+            .map_err(Error::mcap("read", Path::new("the mcap bytes")))?;
     let mut out = Vec::new();
     for m in stream {
         match m {

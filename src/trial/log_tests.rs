@@ -53,7 +53,7 @@ fn synthetic(
     log: &mut TrialLog,
     ticks: u64,
     mut after_camera: impl FnMut(f64),
-) -> anyhow::Result<Written> {
+) -> crate::Result<Written> {
     let ws = Workspace::from_toml_str(WORKSPACE)?;
     let mut assessor = Assessor::new(ws.clone(), AssessConfig::default())?;
     let mut w = Written::default();

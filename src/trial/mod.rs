@@ -32,7 +32,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use anyhow::Context as _;
+use crate::Error;
 use clap::Args;
 use policies::PolicyKind;
 
@@ -100,7 +100,7 @@ pub struct TrialArgs {
 }
 
 /// Runs `hrc-adapt trial`.
-pub fn run(args: TrialArgs) -> anyhow::Result<()> {
+pub fn run(args: TrialArgs) -> crate::Result<()> {
     let config = match &args.config {
         Some(p) => config::TrialConfig::from_file(p)?,
         None => config::TrialConfig::shipped()?,
@@ -129,9 +129,12 @@ pub fn run(args: TrialArgs) -> anyhow::Result<()> {
                 script: args.script_port.unwrap_or(d.script),
             };
         }
-        _ => anyhow::ensure!(
+        _ => ensure!(
             given.iter().all(Option::is_none),
-            "--rtde-port, --dashboard-port and --script-port need --robot <address>"
+            Error::usage(
+                "--rtde-port, --dashboard-port, --script-port",
+                "--rtde-port, --dashboard-port and --script-port need --robot <address>"
+            )
         ),
     }
     // The wall clock is used only for the folder name; a folder of the same second gets a
@@ -160,10 +163,7 @@ pub fn run(args: TrialArgs) -> anyhow::Result<()> {
             // A trial that ended before writing anything (a bad config, Ctrl-C at the UR5e's
             // `yes`) leaves no empty run folder behind: `remove_dir` removes only an empty one.
             let _ = std::fs::remove_dir(&dir);
-            if let Some(dir) = e
-                .downcast_ref::<runtime::TrialEnded>()
-                .and_then(|t| t.dir.as_ref())
-            {
+            if let Some(dir) = e.trial_ended().and_then(|t| t.dir.as_ref()) {
                 println!("{}", dir.display());
             }
             return Err(e);
@@ -226,19 +226,27 @@ pub(crate) fn robot_choice(
     robot: &str,
     speedup: Option<u32>,
     live: bool,
-) -> anyhow::Result<runtime::RobotChoice> {
+) -> crate::Result<runtime::RobotChoice> {
     Ok(match robot {
-        "sim" if live => anyhow::bail!(
-            "--robot sim runs on a mock clock as fast as the CPU allows, which a live camera \
-             cannot follow; use --robot emulator (real time with a camera) or a UR5e"
-        ),
+        "sim" if live => {
+            return Err(Error::usage(
+                "--robot",
+                "--robot sim runs on a mock clock as fast as the CPU allows, which a live \
+                 camera cannot follow; use --robot emulator (real time with a camera) or a UR5e",
+            ));
+        }
         "sim" => runtime::RobotChoice::Sim,
         "emulator" => {
             let speedup = match (speedup, live) {
-                (Some(s), true) if s != 1 => anyhow::bail!(
-                    "--speedup {s}: a live camera runs in real time, so the emulator must too \
-                     (--speedup 1, the default with a camera)"
-                ),
+                (Some(s), true) if s != 1 => {
+                    return Err(Error::usage(
+                        "--speedup",
+                        format!(
+                            "--speedup {s}: a live camera runs in real time, so the emulator \
+                             must too (--speedup 1, the default with a camera)"
+                        ),
+                    ));
+                }
                 (Some(s), _) => s,
                 (None, true) => 1,
                 (None, false) => 4,
@@ -259,7 +267,7 @@ pub(crate) fn cue_source(
     cues: Option<&std::path::Path>,
     camera: &crate::vision_cmd::CameraArgs,
     store_video: Option<&std::path::Path>,
-) -> anyhow::Result<cues::CueSource> {
+) -> crate::Result<cues::CueSource> {
     use crate::vision_cmd::CueInput;
     let input = match cues {
         None => None,
@@ -279,11 +287,16 @@ pub(crate) fn cue_source(
         .into_iter()
         .filter_map(|(given, name)| given.then_some(name))
         .collect();
-        anyhow::ensure!(
+        ensure!(
             given.is_empty(),
-            "{} need{} a live camera (--cues camera or webcam:N)",
-            given.join(", "),
-            if given.len() == 1 { "s" } else { "" }
+            Error::usage(
+                "--extrinsics, --intrinsics, --lite, --store-video",
+                format!(
+                    "{} need{} a live camera (--cues camera or webcam:N)",
+                    given.join(", "),
+                    if given.len() == 1 { "s" } else { "" }
+                )
+            )
         );
         return Ok(cues.map_or(cues::CueSource::Simulated, |p| {
             cues::CueSource::Recorded(p.to_path_buf())
@@ -291,11 +304,14 @@ pub(crate) fn cue_source(
     };
     // The operator's positions drive the robot's separation monitoring (SAF-REQ-007 and the
     // QP's separation limits): without extrinsics they would be in the camera frame.
-    anyhow::ensure!(
+    ensure!(
         camera.extrinsics.is_some(),
-        "a live camera in a trial needs --extrinsics (from `hrc-adapt calibrate`): the \
-         operator's head and hand positions drive the robot's separation monitoring, and \
-         without extrinsics they would be in the camera frame, not the workspace frame"
+        Error::usage(
+            "--extrinsics",
+            "a live camera in a trial needs --extrinsics (from `hrc-adapt calibrate`): the \
+             operator's head and hand positions drive the robot's separation monitoring, and \
+             without extrinsics they would be in the camera frame, not the workspace frame"
+        )
     );
     Ok(cues::CueSource::Camera(cues::CameraSpec {
         input,
@@ -303,13 +319,6 @@ pub(crate) fn cue_source(
         store_video: store_video.map(std::path::Path::to_path_buf),
         require_depth: false,
     }))
-}
-
-/// The process exit code for an error of `hrc-adapt trial` or `experiment`: the trial's
-/// ([`runtime::exit_code`], README "Exit codes") when a trial ended abnormally, else 1.
-pub fn exit_code(e: &anyhow::Error) -> u8 {
-    e.downcast_ref::<runtime::TrialEnded>()
-        .map_or(1, runtime::TrialEnded::exit_code)
 }
 
 /// The log filter while a trial runs, unless `RUST_LOG` says otherwise: errors, and the
@@ -362,13 +371,12 @@ const MAX_RUN_DIR_SUFFIX: u32 = 999;
 /// exists (two runs started in the same second), and returns it. The leaf is created
 /// exclusively (`create_dir`, not `create_dir_all`), so two processes never share a folder;
 /// the parents are created as needed. Used by `trial` and `experiment` (issue 10).
-pub(crate) fn create_run_dir(wanted: &Path) -> anyhow::Result<PathBuf> {
+pub(crate) fn create_run_dir(wanted: &Path) -> crate::Result<PathBuf> {
     let (Some(parent), Some(name)) = (wanted.parent(), wanted.file_name()) else {
-        anyhow::bail!("{} cannot be a run folder", wanted.display());
+        return Err(Error::data(wanted.display(), "cannot be a run folder"));
     };
     if !parent.as_os_str().is_empty() {
-        std::fs::create_dir_all(parent)
-            .with_context(|| format!("cannot create {}", parent.display()))?;
+        std::fs::create_dir_all(parent).map_err(Error::io("create", parent))?;
     }
     for n in 1..=MAX_RUN_DIR_SUFFIX {
         let dir = if n == 1 {
@@ -382,14 +390,14 @@ pub(crate) fn create_run_dir(wanted: &Path) -> anyhow::Result<PathBuf> {
             Ok(()) => return Ok(dir),
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
             Err(e) => {
-                return Err(e).with_context(|| format!("cannot create {}", dir.display()));
+                return Err(Error::io("create", &dir)(e));
             }
         }
     }
-    anyhow::bail!(
-        "{} and its suffixes -2 … -{MAX_RUN_DIR_SUFFIX} all exist",
-        wanted.display()
-    )
+    Err(Error::data(
+        wanted.display(),
+        format!("exists, and so do its suffixes -2 … -{MAX_RUN_DIR_SUFFIX}"),
+    ))
 }
 
 /// `YYYYmmdd-HHMMSS` (UTC) of the wall clock, for folder names only.
@@ -490,7 +498,7 @@ mod tests {
         ] as [&std::ffi::OsStr; 7])
         .unwrap()
         .args;
-        let e = format!("{:#}", run(args).unwrap_err());
+        let e = run(args).unwrap_err().with_causes().to_string();
         assert!(e.contains("missing-workspace.toml"), "{e}");
         assert_eq!(std::fs::read_dir(&root).unwrap().count(), 0);
     }
@@ -503,7 +511,10 @@ mod tests {
         let dir = tmp.path().join("run");
         std::fs::create_dir(&dir).unwrap();
         std::fs::write(dir.join("trial.mcap"), "another trial's log").unwrap();
-        let e = format!("{:#}", run_simulated(&spec, &dir, false).unwrap_err());
+        let e = run_simulated(&spec, &dir, false)
+            .unwrap_err()
+            .with_causes()
+            .to_string();
         assert!(
             e.contains("trial.mcap") && e.contains("another trial"),
             "{e}"
@@ -557,7 +568,10 @@ mod tests {
         let mut spec = runtime::test_spec(operator::Level::L1, 1, 2.0);
         spec.config.policy_table = table;
         let out = tmp.path().join("run");
-        let e = format!("{:#}", run_simulated(&spec, &out, false).unwrap_err());
+        let e = run_simulated(&spec, &out, false)
+            .unwrap_err()
+            .with_causes()
+            .to_string();
         assert!(e.contains("rules.none.start_delay_s"), "{e}");
     }
 

@@ -68,13 +68,16 @@ impl Level {
 }
 
 impl std::str::FromStr for Level {
-    type Err = anyhow::Error;
-    fn from_str(s: &str) -> anyhow::Result<Level> {
+    type Err = crate::Error;
+    fn from_str(s: &str) -> crate::Result<Level> {
         match s {
             "L1" | "l1" => Ok(Level::L1),
             "L2" | "l2" => Ok(Level::L2),
             "L3" | "l3" => Ok(Level::L3),
-            _ => anyhow::bail!("unknown condition {s:?}: expected L1, L2 or L3"),
+            _ => Err(crate::Error::usage(
+                "--condition",
+                format!("unknown condition {s:?}: expected L1, L2 or L3"),
+            )),
         }
     }
 }
@@ -326,12 +329,15 @@ pub(crate) struct SimulatedOperator {
 impl SimulatedOperator {
     /// A new operator at time 0 for `level`, drawing from `seed`. The workspace must have all
     /// four roles.
-    pub(crate) fn new(level: Level, workspace: &Workspace, seed: u64) -> anyhow::Result<Self> {
+    pub(crate) fn new(level: Level, workspace: &Workspace, seed: u64) -> crate::Result<Self> {
         let params = LevelParams::for_level(level);
         let mut centres = [Vec3::zeros(); 4];
         for (i, role) in AreaRole::ALL.iter().enumerate() {
             let id = workspace.by_role(*role).ok_or_else(|| {
-                anyhow::anyhow!("the simulated operator needs an area with role {role:?}")
+                crate::Error::data(
+                    "the workspace",
+                    format!("the simulated operator needs an area with role {role:?}"),
+                )
             })?;
             centres[i] = workspace.area(id).representative_centre;
         }

@@ -12,12 +12,13 @@
 //! reader; tests give it scripted or never-answering readers and their own flag.
 
 use std::io::{self, BufRead, Read};
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::sync::{Mutex, OnceLock};
 use std::time::Duration;
 
-use anyhow::Context as _;
+use crate::Error;
 
 /// How often a waiting prompt looks at the stop flag [s]: 50 ms, well under a reaction time.
 pub(crate) const POLL: Duration = Duration::from_millis(50);
@@ -35,8 +36,8 @@ impl std::fmt::Display for Interrupted {
 impl std::error::Error for Interrupted {}
 
 /// Whether `e` (anywhere in its chain, also inside an `io::Error`) is [`Interrupted`].
-pub(crate) fn is_interrupted(e: &anyhow::Error) -> bool {
-    e.chain().any(|c| {
+pub(crate) fn is_interrupted(e: &Error) -> bool {
+    crate::error::causes(e).any(|c| {
         c.is::<Interrupted>()
             || c.downcast_ref::<io::Error>()
                 .and_then(io::Error::get_ref)
@@ -188,19 +189,19 @@ impl BufRead for PromptInput<'_> {
 
 /// One line from `input` (with its newline); `None` when the prompt was interrupted. The end
 /// of the input is an error (nothing to confirm with).
-pub(crate) fn line_or_stop(input: &mut impl BufRead) -> anyhow::Result<Option<String>> {
+pub(crate) fn line_or_stop(input: &mut impl BufRead) -> crate::Result<Option<String>> {
     let mut line = String::new();
     match input.read_line(&mut line) {
-        Ok(0) => anyhow::bail!("the input ended before an answer"),
+        Ok(0) => Err(Error::data("the input", "ended before an answer")),
         Ok(_) => Ok(Some(line)),
         Err(e) if e.get_ref().is_some_and(|i| i.is::<Interrupted>()) => Ok(None),
-        Err(e) => Err(e).context("reading the answer"),
+        Err(e) => Err(Error::io("read the answer from", Path::new("stdin"))(e)),
     }
 }
 
 /// One line from stdin, giving up when `stop` is set (Ctrl-C): `None` then (see the module
 /// docs).
-pub(crate) fn read_line_or_stop(stop: &AtomicBool) -> anyhow::Result<Option<String>> {
+pub(crate) fn read_line_or_stop(stop: &AtomicBool) -> crate::Result<Option<String>> {
     line_or_stop(&mut PromptInput::stdin(stop))
 }
 
@@ -247,10 +248,10 @@ mod tests {
         });
         // The same through any `BufRead` user: an error that says so.
         let mut line = String::new();
-        let e = anyhow::Error::from(input.read_line(&mut line).unwrap_err());
+        let e = Error::io("read", Path::new("stdin"))(input.read_line(&mut line).unwrap_err());
         assert!(is_interrupted(&e), "{e}");
-        assert!(e.to_string().contains("interrupted"), "{e}");
-        assert!(!is_interrupted(&anyhow::anyhow!("other")));
+        assert!(e.with_causes().to_string().contains("interrupted"), "{e}");
+        assert!(!is_interrupted(&Error::data("stdin", "other")));
         drop(release);
     }
 }

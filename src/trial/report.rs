@@ -24,7 +24,7 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, anyhow};
+use crate::Error;
 use assess::Indicator;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -90,8 +90,18 @@ type Chart<'a, 'b> = ChartContext<
 type Res<T> =
     Result<T, DrawingAreaErrorKind<<BitMapBackend<'static> as DrawingBackend>::ErrorType>>;
 
-fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
-    anyhow!("plot: {e}")
+/// A plotting failure's message (the caller names the file: [`Error::Plot`]).
+fn err<E: std::fmt::Display>(e: E) -> String {
+    e.to_string()
+}
+
+/// What the `plot_*` functions return: the plotting library's message on a failure.
+type PlotResult = Result<(), String>;
+
+/// The [`Error::Plot`] of drawing `path`.
+fn plot_error(path: &Path) -> impl FnOnce(String) -> Error {
+    let path = path.to_path_buf();
+    move |reason| Error::Plot { path, reason }
 }
 
 /// A chart with a time axis, caption, units and a light grid.
@@ -196,7 +206,7 @@ fn plot_indicators(
     meta: &TrialMeta,
     rec: &Recorded,
     x: &std::ops::Range<f64>,
-) -> anyhow::Result<()> {
+) -> PlotResult {
     let root = BitMapBackend::new(path, PX).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let (band, main) = root.split_vertically(120);
@@ -290,7 +300,7 @@ fn plot_adaptation(
     meta: &TrialMeta,
     rec: &Recorded,
     x: &std::ops::Range<f64>,
-) -> anyhow::Result<()> {
+) -> PlotResult {
     let root = BitMapBackend::new(path, (PX.0, 760)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let (top, bottom) = root.split_vertically(400);
@@ -379,7 +389,7 @@ fn plot_robot(
     meta: &TrialMeta,
     rec: &Recorded,
     x: &std::ops::Range<f64>,
-) -> anyhow::Result<()> {
+) -> PlotResult {
     let root = BitMapBackend::new(path, (PX.0, 760)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let (top, bottom) = root.split_vertically(380);
@@ -455,7 +465,7 @@ fn plot_motion(
     rec: &Recorded,
     summary: &Summary,
     x: &std::ops::Range<f64>,
-) -> anyhow::Result<()> {
+) -> PlotResult {
     let m = &summary.motion;
     let root = BitMapBackend::new(path, (PX.0, 1000)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
@@ -644,7 +654,7 @@ fn plot_handovers(
     meta: &TrialMeta,
     rec: &Recorded,
     x: &std::ops::Range<f64>,
-) -> anyhow::Result<()> {
+) -> PlotResult {
     let root = BitMapBackend::new(path, (PX.0, 470)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let (top, strip) = root.split_vertically(410);
@@ -897,7 +907,7 @@ pub(crate) fn write(
     options: &LogOptions,
     rec: &Recorded,
     summary: &Summary,
-) -> anyhow::Result<ReportFiles> {
+) -> crate::Result<ReportFiles> {
     register_font()?;
     let t_end = summary
         .completion_time_s
@@ -907,7 +917,7 @@ pub(crate) fn write(
     let mut figures: Vec<(String, PathBuf)> = Vec::new();
 
     let p = dir.join(INDICATORS_PNG);
-    plot_indicators(&p, meta, rec, &x)?;
+    plot_indicators(&p, meta, rec, &x).map_err(plot_error(&p))?;
     figures.push(("Indicators and the dominant indicator".into(), p.clone()));
     plots.push(p);
     if !rec.indicators.is_empty() {
@@ -932,28 +942,28 @@ pub(crate) fn write(
             "Adaptations",
             ADAPTATION_PNG,
             plot_adaptation
-                as fn(&Path, &TrialMeta, &Recorded, &std::ops::Range<f64>) -> anyhow::Result<()>,
+                as fn(&Path, &TrialMeta, &Recorded, &std::ops::Range<f64>) -> PlotResult,
         ),
         ("Robot speed and human distance", ROBOT_PNG, plot_robot),
         ("Handover timeline", HANDOVERS_PNG, plot_handovers),
     ] {
         let p = dir.join(name);
-        f(&p, meta, rec, &x)?;
+        f(&p, meta, rec, &x).map_err(plot_error(&p))?;
         figures.push((title.into(), p.clone()));
         plots.push(p);
     }
     let p = dir.join(MOTION_PNG);
-    plot_motion(&p, meta, rec, summary, &x)?;
+    plot_motion(&p, meta, rec, summary, &x).map_err(plot_error(&p))?;
     figures.push(("Motion quality".into(), p.clone()));
     plots.push(p);
 
     let html = page(meta, summary, &figures)?;
     let path = dir.join(HTML_FILE);
-    std::fs::write(&path, html).with_context(|| format!("cannot write {}", path.display()))?;
+    std::fs::write(&path, html).map_err(Error::io("write", &path))?;
     Ok(ReportFiles { html: path, plots })
 }
 
-fn page(meta: &TrialMeta, s: &Summary, figures: &[(String, PathBuf)]) -> anyhow::Result<String> {
+fn page(meta: &TrialMeta, s: &Summary, figures: &[(String, PathBuf)]) -> crate::Result<String> {
     let mut h = String::new();
     let title = format!(
         "{}Trial {} · {} · {} · seed {}",
@@ -1079,8 +1089,7 @@ th{{background:#f3f3f3}}img{{max-width:100%;border:1px solid #eee}}\
     h.push_str("</table>\n");
     motion_section(&mut h, s);
     for (title, path) in figures {
-        let bytes =
-            std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+        let bytes = std::fs::read(path).map_err(Error::io("read", path))?;
         let name = path
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())

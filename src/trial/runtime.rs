@@ -31,7 +31,6 @@ use adapt::controller::{
 };
 use adapt::envelope::SafetyEnvelope;
 use adapt::task::Phase;
-use anyhow::Context as _;
 use assess::{AssessConfig, Assessor, RobotContext, Workspace};
 use policies::{Adaptation, PolicyKind, RuleTable, TaskPhase};
 use robot_io::geometry::HumanBody;
@@ -49,6 +48,8 @@ use super::events::TrialEvent;
 use super::live::LiveCues;
 use super::log::{ControlLog, ControlSink, LogOptions, TrialLog, TrialMeta};
 use super::operator::{Level, RobotView, SimulatedOperator};
+use crate::Error;
+use crate::error::ResultExt as _;
 
 /// Control period [s] (UR5e).
 const CYCLE_S: f64 = 0.002;
@@ -181,8 +182,8 @@ pub(crate) enum RobotChoice {
 }
 
 impl RobotChoice {
-    /// A UR5e at `host` on the standard ports.
-    #[cfg(test)]
+    /// A UR5e at `host` on the standard ports (the live camera's tests).
+    #[cfg(all(test, feature = "vision"))]
     pub(crate) fn ur(host: &str) -> Self {
         Self::Ur {
             host: host.to_owned(),
@@ -287,16 +288,16 @@ pub struct TrialEnded {
     pub reason: &'static str,
     /// The run folder, with its finished logs.
     pub dir: Option<PathBuf>,
-    error: anyhow::Error,
+    error: Box<Error>,
 }
 
 impl TrialEnded {
     /// A trial stopped before its logs were opened (nothing moved).
-    pub fn before_start(reason: &'static str, error: anyhow::Error) -> Self {
+    pub fn before_start(reason: &'static str, error: Error) -> Self {
         Self {
             reason,
             dir: None,
-            error,
+            error: Box::new(error),
         }
     }
 
@@ -322,7 +323,7 @@ impl std::fmt::Display for TrialEnded {
 
 impl std::error::Error for TrialEnded {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        Some(self.error.as_ref())
+        Some(&*self.error)
     }
 }
 
@@ -340,19 +341,11 @@ impl TrialRobot for LockstepSim {}
 
 /// `first` with `then` added to its context, or `then` alone: the error of an ending that
 /// went wrong more than once.
-fn chain(first: Option<anyhow::Error>, then: anyhow::Error) -> anyhow::Error {
+fn chain(first: Option<Error>, then: Error) -> Error {
     match first {
-        Some(f) => f.context(format!("{then:#}")),
+        Some(f) => f.context(then.with_causes().to_string()),
         None => then,
     }
-}
-
-/// The panic message of a caught panic.
-fn panic_message(p: &(dyn std::any::Any + Send)) -> &str {
-    p.downcast_ref::<&str>()
-        .copied()
-        .or_else(|| p.downcast_ref::<String>().map(String::as_str))
-        .unwrap_or("(no message)")
 }
 
 /// Joint distance [rad] under which a motion phase counts as at its target (settling, or
@@ -478,7 +471,7 @@ pub(crate) fn run_simulated_with(
     out_dir: &Path,
     stop: &AtomicBool,
     progress: &mut dyn FnMut(&Live),
-) -> anyhow::Result<PathBuf> {
+) -> crate::Result<PathBuf> {
     run_trial_with(spec, &RobotChoice::Sim, out_dir, stop, progress)
 }
 
@@ -491,7 +484,7 @@ pub(crate) fn run_trial_with(
     out_dir: &Path,
     stop: &AtomicBool,
     progress: &mut dyn FnMut(&Live),
-) -> anyhow::Result<PathBuf> {
+) -> crate::Result<PathBuf> {
     run_trial_with_cues(spec, robot, &CueSource::Simulated, out_dir, stop, progress)
 }
 
@@ -504,7 +497,7 @@ pub(crate) fn run_trial_with_cues(
     out_dir: &Path,
     stop: &AtomicBool,
     progress: &mut dyn FnMut(&Live),
-) -> anyhow::Result<PathBuf> {
+) -> crate::Result<PathBuf> {
     let setup = load_setup(spec, robot, cues, out_dir)?;
     let home = setup.ctl_cfg.task.home_q_rad;
     match robot {
@@ -565,7 +558,7 @@ fn load_setup(
     robot: &RobotChoice,
     cues: &CueSource,
     out_dir: &Path,
-) -> anyhow::Result<Setup> {
+) -> crate::Result<Setup> {
     // Without a camera front-end, the robot and the run folder matter only to a live camera.
     #[cfg(not(feature = "vision"))]
     let _ = (robot, out_dir);
@@ -590,14 +583,13 @@ fn load_setup(
     let workspace = Workspace::from_toml_file(&cfg.workspace)
         .with_context(|| format!("workspace {}", cfg.workspace.display()))?;
     let assess_cfg = match &cfg.assess {
-        Some(p) => AssessConfig::from_toml_file(p).with_context(|| format!("{}", p.display()))?,
+        Some(p) => AssessConfig::from_toml_file(p).map_err(|e| Error::from(e).in_file(p))?,
         None => AssessConfig::default(),
     };
     let raw: RawHandoverFile = toml::from_str(
-        &std::fs::read_to_string(&cfg.controller)
-            .with_context(|| format!("reading {}", cfg.controller.display()))?,
+        &std::fs::read_to_string(&cfg.controller).map_err(Error::io("read", &cfg.controller))?,
     )
-    .with_context(|| format!("parsing {}", cfg.controller.display()))?;
+    .map_err(Error::toml(cfg.controller.display()))?;
     let ctl_cfg = ControllerConfig::try_from(&raw.controller)?;
     super::config::check_task_poses(
         &ctl_cfg.task,
@@ -646,7 +638,7 @@ impl OperatorSource for LiveCues {
         _robot: &RobotView,
         _frame: &mut assess::CueFrame,
         _log: &mut TrialLog,
-    ) -> anyhow::Result<Option<f64>> {
+    ) -> crate::Result<Option<f64>> {
         match *self {}
     }
 }
@@ -662,7 +654,7 @@ fn drive<R: TrialRobot>(
     out_dir: &Path,
     stop: &AtomicBool,
     progress: &mut dyn FnMut(&Live),
-) -> anyhow::Result<PathBuf> {
+) -> crate::Result<PathBuf> {
     let cfg = &spec.config;
     let Setup {
         workspace,
@@ -770,12 +762,10 @@ fn drive<R: TrialRobot>(
             // The control thread's log ring overflowed: the logs miss records (the motion
             // metrics included), so the trial's figures cannot be trusted.
             reason = reason::ERROR;
-            failure = Some(anyhow::anyhow!(
-                "{} control-rate log records were lost (the log ring was full); the logs in {} \
-                 are incomplete",
-                files.dropped_records,
-                files.dir.display()
-            ));
+            failure = Some(Error::LogIncomplete {
+                dropped: files.dropped_records,
+                dir: files.dir.clone(),
+            });
             files.dir
         }
         Ok(files) => files.dir,
@@ -792,16 +782,16 @@ fn drive<R: TrialRobot>(
     if exit_code(reason) == 0 && failure.is_none() {
         return Ok(dir);
     }
-    let error = failure.unwrap_or_else(|| {
-        anyhow::anyhow!(detail.unwrap_or_else(|| match reason {
+    let error = failure.unwrap_or_else(|| Error::Ending {
+        why: detail.unwrap_or_else(|| match reason {
             reason::INTERRUPTED => "interrupted (Ctrl-C)".to_owned(),
             r => r.to_owned(),
-        }))
+        }),
     });
     Err(TrialEnded {
         reason,
         dir: Some(dir),
-        error,
+        error: Box::new(error),
     }
     .into())
 }
@@ -810,7 +800,7 @@ fn drive<R: TrialRobot>(
 struct LoopEnd {
     reason: &'static str,
     detail: Option<String>,
-    failure: Option<anyhow::Error>,
+    failure: Option<Error>,
     /// Trial time of the end [s].
     t_end: f64,
 }
@@ -852,9 +842,9 @@ enum CueExchange {
 /// its own (real time; [`ThreadedCues`]).
 trait CueLink<L: ControlSink> {
     /// Called every control cycle after the state is read.
-    fn exchange(&mut self, robot: &RobotSnapshot, log: &mut L) -> anyhow::Result<CueExchange>;
+    fn exchange(&mut self, robot: &RobotSnapshot, log: &mut L) -> crate::Result<CueExchange>;
     /// The controller confirmed a release at `t_s` [s].
-    fn released(&mut self, t_s: f64, log: &mut L) -> anyhow::Result<()>;
+    fn released(&mut self, t_s: f64, log: &mut L) -> crate::Result<()>;
     /// The robot link is down for `down_s` [s] (`None`: back), for the progress display.
     fn link_down(&mut self, down_s: Option<f64>);
 }
@@ -891,7 +881,7 @@ impl CueRunner {
         robot: &RobotSnapshot,
         log: &mut TrialLog,
         progress: &mut dyn FnMut(&Live),
-    ) -> anyhow::Result<CueExchange> {
+    ) -> crate::Result<CueExchange> {
         // Frame n is due at cycle ceil(n / rate / 2 ms): integer test k·2ms·rate ≥ n.
         if robot.t_s * self.rate + 1e-9 < self.next as f64 {
             return Ok(CueExchange::Nothing);
@@ -933,11 +923,11 @@ impl CueLink<TrialLog> for InlineCues<'_> {
         &mut self,
         robot: &RobotSnapshot,
         log: &mut TrialLog,
-    ) -> anyhow::Result<CueExchange> {
+    ) -> crate::Result<CueExchange> {
         self.runner.run_due(self.cue, robot, log, self.progress)
     }
 
-    fn released(&mut self, t_s: f64, log: &mut TrialLog) -> anyhow::Result<()> {
+    fn released(&mut self, t_s: f64, log: &mut TrialLog) -> crate::Result<()> {
         self.cue.source.released(t_s, log)
     }
 
@@ -991,7 +981,7 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
     let hold_cmd = JointCommand::Stop { decel: 3.0 };
     // The loop runs inside a closure (every `?` and panic leaves it, never `drive`), so the exit
     // path below always runs: stop the robot, close the camera, finish the logs.
-    let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> anyhow::Result<()> {
+    let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> crate::Result<()> {
         while k < max_cycles {
             if stop.load(Ordering::Relaxed) {
                 reason = reason::INTERRUPTED;
@@ -1220,13 +1210,10 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
         }
         Ok(())
     }));
-    let mut failure: Option<anyhow::Error> = match run {
+    let mut failure: Option<Error> = match run {
         Ok(Ok(())) => None,
         Ok(Err(e)) => Some(e),
-        Err(p) => Some(anyhow::anyhow!(
-            "the trial loop panicked: {}",
-            panic_message(p.as_ref())
-        )),
+        Err(p) => Some(Error::panic("the trial loop", p.as_ref())),
     };
     if failure.is_some() {
         reason = reason::ERROR;
@@ -1240,10 +1227,7 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
         stop_robot(&mut cc.supervisor, &mut cc.state, &mut cc.world, t_end);
     }));
     if let Err(p) = stopped {
-        let e = anyhow::anyhow!(
-            "stopping the robot through the supervisor panicked: {}",
-            panic_message(p.as_ref())
-        );
+        let e = Error::panic("stopping the robot through the supervisor", p.as_ref());
         reason = reason::ERROR;
         failure = Some(chain(failure.take(), e));
     }
@@ -1307,7 +1291,7 @@ mod threaded {
             &mut self,
             robot: &RobotSnapshot,
             _log: &mut ControlLog,
-        ) -> anyhow::Result<CueExchange> {
+        ) -> crate::Result<CueExchange> {
             self.mine.robot = *robot;
             self.to_cue.write(self.mine);
             let from = *self.from_cue.read();
@@ -1323,7 +1307,7 @@ mod threaded {
             Ok(CueExchange::Nothing)
         }
 
-        fn released(&mut self, t_s: f64, _log: &mut ControlLog) -> anyhow::Result<()> {
+        fn released(&mut self, t_s: f64, _log: &mut ControlLog) -> crate::Result<()> {
             self.mine.released += 1;
             self.mine.last_release_t_s = t_s;
             self.to_cue.write(self.mine);
@@ -1386,14 +1370,17 @@ mod threaded {
                     return LoopEnd {
                         reason: reason::ERROR,
                         detail: None,
-                        failure: Some(anyhow::anyhow!("cannot start the control thread: {e}")),
+                        failure: Some(Error::Thread {
+                            name: "control thread",
+                            source: e,
+                        }),
                         t_end: 0.0,
                     };
                 }
             };
             let mut runner = CueRunner::new(plan.cfg.cue_rate_hz, plan.n_handovers);
             let cued =
-                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> anyhow::Result<()> {
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> crate::Result<()> {
                     let (mut frames, mut handled) = (0u64, 0u32);
                     let mut ended = false;
                     loop {
@@ -1440,10 +1427,7 @@ mod threaded {
             let cue_failure = match cued {
                 Ok(Ok(())) => None,
                 Ok(Err(e)) => Some(e.context("the cue cycle failed")),
-                Err(p) => Some(anyhow::anyhow!(
-                    "the cue cycle panicked: {}",
-                    panic_message(p.as_ref())
-                )),
+                Err(p) => Some(Error::panic("the cue cycle", p.as_ref())),
             };
             if cue_failure.is_some() {
                 // End the control loop (it stops the robot), keeping its log flowing meanwhile.
@@ -1461,10 +1445,7 @@ mod threaded {
                 Err(p) => LoopEnd {
                     reason: reason::ERROR,
                     detail: None,
-                    failure: Some(anyhow::anyhow!(
-                        "the control thread panicked: {}",
-                        panic_message(p.as_ref())
-                    )),
+                    failure: Some(Error::panic("the control thread", p.as_ref())),
                     t_end: 0.0,
                 },
             };
@@ -1487,7 +1468,7 @@ mod threaded {
 fn control_cycle<R: TrialRobot>(
     robot: R,
     mut ctl_cfg: ControllerConfig,
-) -> anyhow::Result<ControlCycle<R>> {
+) -> crate::Result<ControlCycle<R>> {
     let supervisor_cfg = SupervisorConfig::ur5e();
     ctl_cfg.envelope = planner_envelope(&supervisor_cfg)?;
     Ok(ControlCycle::new(
@@ -1498,7 +1479,7 @@ fn control_cycle<R: TrialRobot>(
 
 /// The planner's [`SafetyEnvelope`]: the supervisor's joint, TCP, collaboration and
 /// staleness limits, its stop deceleration and its separation, arm and body models.
-pub(crate) fn planner_envelope(cfg: &SupervisorConfig) -> anyhow::Result<SafetyEnvelope> {
+pub(crate) fn planner_envelope(cfg: &SupervisorConfig) -> crate::Result<SafetyEnvelope> {
     SafetyEnvelope::new(
         cfg.joint_rates.max_speed_rad_s(),
         cfg.joint_rates.max_acc_rad_s2(),
@@ -1613,7 +1594,7 @@ pub fn run_simulated(
     spec: &TrialSpec,
     out_dir: &Path,
     show_progress: bool,
-) -> anyhow::Result<PathBuf> {
+) -> crate::Result<PathBuf> {
     let stop = AtomicBool::new(false);
     let bar = progress_bar(show_progress);
     let dir = run_simulated_with(spec, out_dir, &stop, &mut |l| update_bar(&bar, l))?;

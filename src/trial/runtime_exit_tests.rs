@@ -14,13 +14,15 @@ use super::*;
 use crate::trial::log::read_mcap_messages;
 
 /// What a trial that did not end normally left: (reason, run folder, message, exit code).
-fn ended(r: anyhow::Result<PathBuf>) -> (&'static str, PathBuf, String, u8) {
+fn ended(r: crate::Result<PathBuf>) -> (&'static str, PathBuf, String, u8) {
     let e = r.expect_err("the trial should not end normally");
-    let message = format!("{e:#}");
+    let message = e.with_causes().to_string();
     let t = e
-        .downcast_ref::<TrialEnded>()
+        .trial_ended()
         .unwrap_or_else(|| panic!("not a TrialEnded: {message}"));
     let dir = t.dir.clone().expect("the logs were opened");
+    // The binary takes the exit code from the error itself.
+    assert_eq!(e.exit_code(), t.exit_code(), "{message}");
     (t.reason, dir, message, t.exit_code())
 }
 
@@ -63,7 +65,7 @@ fn run_on_emulator(
     out: &Path,
     stop: &AtomicBool,
     hook: &mut dyn FnMut(&Emulator, &Live),
-) -> anyhow::Result<PathBuf> {
+) -> crate::Result<PathBuf> {
     let _one_at_a_time = EMULATOR_TESTS.lock().unwrap_or_else(|e| e.into_inner());
     let choice = RobotChoice::Emulator { speedup: 10 };
     let setup = load_setup(spec, &choice, &CueSource::Simulated, out)?;
@@ -221,7 +223,7 @@ impl Robot for FailingRobot {
 
 impl TrialRobot for FailingRobot {}
 
-fn run_failing(out: &Path, panic: bool) -> anyhow::Result<PathBuf> {
+fn run_failing(out: &Path, panic: bool) -> crate::Result<PathBuf> {
     let spec = test_spec(Level::L1, 1, 10.0);
     let setup = load_setup(&spec, &RobotChoice::Sim, &CueSource::Simulated, out).unwrap();
     let sim = SimRobot::new(SimConfig {
