@@ -4,8 +4,8 @@
 //! in the repository's `data/` folder and its `config/` folder, and a counting allocator. Each
 //! crate's own tests live in that crate (`<crate>/tests/`); cross-crate closed-loop tests belong
 //! in `tests/tests/`: `closed_loop.rs` wires `adapt::Controller` through `safety::Supervisor` to
-//! `SimRobot` as the trial runtime does. Whole-trial tests need the trial runtime, which is still
-//! in the `hrc-adapt` binary (ARCHITECTURE.md, "Where the tests live").
+//! `SimRobot` as the trial runtime does. Whole-trial tests are still unit tests of the root
+//! package's library (`hrc_adapt::trial`; ARCHITECTURE.md, "Where the tests live").
 
 use std::path::PathBuf;
 
