@@ -660,6 +660,9 @@ pub enum ReplayMode {
 struct TraceColumn {
     ty: FieldType,
     cols: [usize; 6],
+    /// An output register the trace did not record: served as 0, as a controller serves a
+    /// register nothing writes.
+    unrecorded_register: bool,
 }
 
 /// Backend streaming a recorded [`Trace`].
@@ -739,17 +742,33 @@ impl EmulatorBackend for TraceBackend {
         )
     }
 
+    /// A recorded field, or an output register the trace lacks (0, as on a controller where
+    /// nothing writes it: `RtdeRobot` subscribes to our program's tick register, which a
+    /// replayed trace has no program to write). Any other field missing from the trace is
+    /// `NOT_FOUND`.
     fn output_handle(&mut self, name: &str) -> Option<(OutputHandle, FieldType)> {
         let ty = known_field_type(name)?;
         let mut cols = [0usize; 6];
-        if ty.width() == 1 {
-            cols[0] = self.trace.column_index(name)?;
+        let recorded = if ty.width() == 1 {
+            self.trace.column_index(name).map(|c| cols[0] = c)
         } else {
-            for (i, c) in cols.iter_mut().take(ty.width()).enumerate() {
-                *c = self.trace.column_index(&format!("{name}_{i}"))?;
-            }
+            cols.iter_mut()
+                .take(ty.width())
+                .enumerate()
+                .try_for_each(|(i, c)| {
+                    *c = self.trace.column_index(&format!("{name}_{i}"))?;
+                    Some(())
+                })
+        };
+        let unrecorded_register = recorded.is_none();
+        if unrecorded_register && !name.starts_with("output_") {
+            return None;
         }
-        self.columns.push(TraceColumn { ty, cols });
+        self.columns.push(TraceColumn {
+            ty,
+            cols,
+            unrecorded_register,
+        });
         Some((OutputHandle(self.columns.len() - 1), ty))
     }
 
@@ -757,6 +776,9 @@ impl EmulatorBackend for TraceBackend {
         let Some(c) = self.columns.get(handle.0) else {
             return Value::Double(0.0);
         };
+        if c.unrecorded_register {
+            return Value::zero(c.ty);
+        }
         let w = c.ty.width();
         let mut v = [0.0f64; 6];
         let interpolate = self.mode == ReplayMode::Interpolate

@@ -470,3 +470,31 @@ async fn the_dashboard_bounds_a_line_and_discards_the_rest_of_an_overlong_one() 
     .await
     .expect("test timed out");
 }
+
+/// A trace replay serves an output register the trace did not record as 0, as a controller
+/// serves a register nothing writes (`RtdeRobot` subscribes to our program's tick register),
+/// while any other unrecorded field stays NOT_FOUND and recorded ones are replayed.
+#[test]
+fn trace_replay_serves_unrecorded_output_registers_as_zero_and_nothing_else() {
+    use robot_io::emulator::EmulatorBackend;
+    let mut b = TraceBackend::new(numbered_trace(5), ReplayMode::Hold).unwrap();
+    for (name, ty) in [
+        ("output_int_register_24", FieldType::Int32),
+        ("output_double_register_3", FieldType::Double),
+        ("output_bit_registers0_to_31", FieldType::Uint32),
+    ] {
+        let (h, got) = b.output_handle(name).expect(name);
+        assert_eq!(got, ty, "{name}");
+        assert_eq!(b.read_output(h), Value::zero(ty), "{name}");
+    }
+    assert!(
+        b.output_handle("actual_q").is_none(),
+        "actual_q is not in the trace"
+    );
+    assert!(b.output_handle("input_int_register_24").is_none());
+    assert!(b.output_handle("no_such_field").is_none());
+    let (h, _) = b.output_handle("speed_scaling").unwrap();
+    assert_eq!(b.read_output(h), Value::Double(0.0)); // row 0 records k = 0
+    let (h, _) = b.output_handle("timestamp").unwrap();
+    assert_eq!(b.read_output(h), Value::Double(10.0));
+}
