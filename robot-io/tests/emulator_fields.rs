@@ -87,8 +87,8 @@ fn decode_all(types: &[FieldType], payload: &[u8]) -> Vec<Value> {
     out
 }
 
-/// Every field of the table is accepted with its guide type (the codec's, where it knows
-/// the name), in one recipe, and streams values of that size; and the derived values are
+/// Every field of the table is accepted with its guide type (the codec knows each with the
+/// same type), in one recipe, and streams values of that size; and the derived values are
 /// physically consistent: a RUNNING arm at 48 V, temperatures at or above ambient, the
 /// accelerometer reading 1 g, currents of the moment's sign.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -97,10 +97,14 @@ async fn every_rtde_guide_output_field_is_served_with_its_type() {
         let emu = sim_emulator().await;
         let mut c = Raw::connect(&emu).await;
         assert!(c.version(2).await);
+        // The codec knows every field the sim backend serves, with the same type, so a trace
+        // that recorded one of them replays it instead of answering NOT_FOUND.
         for (name, ty) in SIM_OUTPUT_FIELDS {
-            if let Some(known) = known_field_type(name) {
-                assert_eq!(known, ty, "{name}: table and codec disagree");
-            }
+            assert_eq!(
+                known_field_type(name),
+                Some(ty),
+                "{name}: the codec's type differs from the sim backend's"
+            );
         }
         // The guide's 2048-byte bound on a name list: two recipes.
         let (a, b) = SIM_OUTPUT_FIELDS.split_at(35);
@@ -254,17 +258,4 @@ async fn several_output_recipes_stream_at_their_own_frequencies() {
     })
     .await
     .expect("test timed out");
-}
-
-/// The codec knows every field the sim backend serves, with the same type, so a trace that
-/// recorded one of them replays it instead of answering NOT_FOUND.
-#[test]
-fn the_codec_knows_every_sim_output_field_with_its_type() {
-    for (name, ty) in robot_io::emulator::sim_fields::SIM_OUTPUT_FIELDS {
-        assert_eq!(
-            robot_io::codec::known_field_type(name),
-            Some(ty),
-            "{name}: the codec's type differs from the sim backend's"
-        );
-    }
 }
