@@ -2,11 +2,11 @@
 //! on configurable ports, backed by [`SimBackend`] (the in-process [`SimRobot`], driven by our
 //! register protocol) or [`TraceBackend`] (a recorded [`Trace`]).
 //!
-//! One world task steps the backend in 2 ms controller cycles on a virtual clock: it runs
-//! `speedup` cycles per 2 ms of wall time (1 = real time; tests speed it up). The clock keeps
-//! absolute ticks (tick n is due at start + n · 2 ms) and catches up after missed ones, within
-//! a bound per wake ([`plan_ticks`]); [`Emulator::clock_stats`] reports how far it fell behind.
-//! Each RTDE session
+//! One clock thread steps the backend in 2 ms controller cycles on a virtual clock: one cycle
+//! every 2 ms / `speedup` of wall time (1 = real time; tests speed it up). The clock keeps
+//! absolute cycles (cycle n is due at start + n · 2 ms / speedup) and catches up after missed
+//! ones, within a bound per wake ([`plan_ticks`]); [`Emulator::clock_stats`] reports how far it
+//! fell behind. Each RTDE session
 //! is sampled from the virtual clock at its requested frequency, so what a client receives
 //! depends on virtual cycles only, not on scheduling jitter.
 //!
@@ -22,7 +22,7 @@
 use std::any::Any;
 use std::collections::HashMap;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -79,47 +79,48 @@ pub struct EmulatorConfig {
     pub preclaimed_inputs: Vec<String>,
 }
 
-/// The largest [`EmulatorConfig::speedup`] [-]: 100. Each 2 ms tick runs `speedup` controller
-/// cycles while holding the emulator's state, so a tick at 100 is still a small fraction of
-/// the 2 ms, and a client reading every sample (500 × speedup per second) already skips most
-/// of them; a huge value kept the emulator busy for ever (issue 10: 4294967295 hung it).
+/// The largest [`EmulatorConfig::speedup`] [-]: 100. The clock runs one controller cycle
+/// every 2 ms / `speedup` of wall time (20 µs at 100), each while holding the emulator's
+/// state, and a client reading every sample (500 × speedup per second) already skips most of
+/// them; a huge value kept the emulator busy for ever (issue 10: 4294967295 hung it).
 pub const MAX_SPEEDUP: u32 = 100;
 
 /// The most controller cycles one wake of the emulator's clock runs when catching up [-]:
-/// 1000 (2 s of virtual time). See [`max_ticks_per_wake`].
+/// 1000 (2 s of virtual time). See [`max_cycles_per_wake`].
 pub const MAX_CATCH_UP_CYCLES: u64 = 1000;
 
-/// The most 2 ms wall-clock ticks one wake of the emulator's clock runs [-]: 50 (100 ms of
-/// wall time). See [`max_ticks_per_wake`].
-pub const MAX_CATCH_UP_TICKS: u64 = 50;
+/// The most wall time one wake of the emulator's clock catches up [ms]: 100. See
+/// [`max_cycles_per_wake`].
+pub const MAX_CATCH_UP_WALL_MS: u64 = 100;
 
-/// The bound on ticks run in one wake of the clock at `speedup` [ticks]: as many as fit in
-/// [`MAX_CATCH_UP_CYCLES`] cycles, at most [`MAX_CATCH_UP_TICKS`] (100 ms of wall time), at
+/// The bound on cycles run in one wake of the clock at `speedup` [cycles]: those due in
+/// [`MAX_CATCH_UP_WALL_MS`] of wall time (50 × speedup), at most [`MAX_CATCH_UP_CYCLES`], at
 /// least 1. So at speedup 1 a stall of up to 100 ms is caught up in one burst of at most 50
-/// cycles, at speedup 100 one of up to 20 ms in at most 1000 cycles; ticks due beyond the
+/// cycles, at speedup 100 one of up to 20 ms in at most 1000 cycles; cycles due beyond the
 /// bound are dropped (counted in [`ClockStats::cycles_dropped`]), so a long stall (a stopped
 /// process, a loaded CI machine) never runs thousands of cycles while holding the emulator's
 /// state and flooding every client's queue.
-pub fn max_ticks_per_wake(speedup: u32) -> u64 {
-    (MAX_CATCH_UP_CYCLES / u64::from(speedup.max(1))).clamp(1, MAX_CATCH_UP_TICKS)
+pub fn max_cycles_per_wake(speedup: u32) -> u64 {
+    let wall = MAX_CATCH_UP_WALL_MS * 1_000_000 / CYCLE_NS;
+    wall.saturating_mul(u64::from(speedup.max(1)))
+        .clamp(1, MAX_CATCH_UP_CYCLES)
 }
 
-/// What one wake of the emulator's clock does ([`plan_ticks`]), in 2 ms wall-clock ticks
-/// (each runs `speedup` controller cycles).
+/// What one wake of the emulator's clock does ([`plan_ticks`]), in controller cycles.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct TickPlan {
-    /// Ticks to run now [ticks].
+    /// Cycles to run now [cycles].
     pub run: u64,
-    /// Of those, ticks run late: due before the newest due tick, i.e. catching up [ticks].
+    /// Of those, cycles run late: due before the newest due cycle, i.e. catching up [cycles].
     pub late: u64,
-    /// Ticks due beyond the per-wake bound: skipped, never run [ticks].
+    /// Cycles due beyond the per-wake bound: skipped, never run [cycles].
     pub dropped: u64,
 }
 
-/// The clock's schedule for one wake: `due` ticks are due since the start (wall time elapsed
-/// / 2 ms, rounded down), `done` have been run or dropped before, and at most `max_per_wake`
-/// (taken as at least 1) run now. The rest of the backlog is dropped, so after this wake
-/// `done + run + dropped == due` whenever `due >= done`.
+/// The clock's schedule for one wake: `due` cycles are due since the start (wall time elapsed
+/// × speedup / 2 ms, rounded down), `done` have been run or dropped before, and at most
+/// `max_per_wake` (taken as at least 1) run now. The rest of the backlog is dropped, so after
+/// this wake `done + run + dropped == due` whenever `due >= done`.
 pub fn plan_ticks(due: u64, done: u64, max_per_wake: u64) -> TickPlan {
     let behind = due.saturating_sub(done);
     let run = behind.min(max_per_wake.max(1));
@@ -131,17 +132,18 @@ pub fn plan_ticks(due: u64, done: u64, max_per_wake: u64) -> TickPlan {
 }
 
 /// How the emulator's clock kept up with wall time ([`Emulator::clock_stats`]), in controller
-/// cycles (a 2 ms wall-clock tick is `speedup` cycles). As of the clock's last wake,
-/// `cycles_run + cycles_dropped + cycles_paused == ticks_elapsed × speedup` exactly.
+/// cycles. As of the clock's last wake,
+/// `cycles_run + cycles_dropped + cycles_paused == cycles_elapsed` exactly.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct ClockStats {
-    /// 2 ms wall-clock ticks elapsed since the start, as of the clock's last wake [ticks].
-    pub ticks_elapsed: u64,
+    /// Cycles due since the start (wall time × speedup / 2 ms), as of the clock's last wake
+    /// [cycles].
+    pub cycles_elapsed: u64,
     /// Cycles run [cycles] (the virtual clock, [`Emulator::cycle`]).
     pub cycles_run: u64,
-    /// Cycles run late, in a catch-up burst after missed ticks [cycles].
+    /// Cycles run late, in a catch-up burst after a late wake [cycles].
     pub cycles_late: u64,
-    /// Cycles due beyond the per-wake bound ([`max_ticks_per_wake`]) and never run: how far
+    /// Cycles due beyond the per-wake bound ([`max_cycles_per_wake`]) and never run: how far
     /// the virtual clock fell behind wall time × speedup for good [cycles].
     pub cycles_dropped: u64,
     /// Cycles not run because the emulator was paused ([`Emulator::pause`]; by design, not
@@ -275,8 +277,8 @@ const SIM_OUTPUT_INT_BASE: usize = 2000;
 /// The SimRobot starts with its program stopped. A script containing our control program
 /// (recognised by [`RegisterMap::from_program`]) starts it; from then on each cycle the
 /// registers are decoded like the program does and a new command (new sequence number) is
-/// sent to the SimRobot. While a servo command is in force, every cycle (each of the
-/// `speedup` cycles of a burst too) sends the SimRobot its extrapolated target,
+/// sent to the SimRobot. While a servo command is in force, every cycle (each cycle of a
+/// catch-up burst too) sends the SimRobot its extrapolated target,
 /// [`ServoFeedforward::target`] at the program's tick, as the URScript program does (see
 /// [`crate::script`]; the emulator runs one program iteration per cycle, servoj time t = one
 /// cycle, and serves the tick as `output_int_register_<int_base>`). The watchdog is armed at the first write of the command register
@@ -1194,6 +1196,10 @@ fn input_target(name: &str) -> Option<(Target, FieldType)> {
 pub struct Emulator {
     world: Arc<Mutex<World>>,
     tasks: Vec<JoinHandle<()>>,
+    /// The clock thread ([`clock`]), joined by [`Emulator::shutdown`].
+    clock: Mutex<Option<std::thread::JoinHandle<()>>>,
+    /// Tells the clock thread to end.
+    clock_stop: Arc<AtomicBool>,
     /// `true` while paused ([`Emulator::pause`]); every server waits on it.
     pause: watch::Sender<bool>,
     rtde: SocketAddr,
@@ -1263,8 +1269,18 @@ impl Emulator {
         let cfg = Arc::new(cfg);
         let programs = Arc::new(AtomicU64::new(0));
         let (pause, paused) = watch::channel(false);
+        let clock_stop = Arc::new(AtomicBool::new(false));
+        let clock = {
+            let (world, stop, speedup) = (world.clone(), clock_stop.clone(), cfg.speedup);
+            std::thread::Builder::new()
+                .name("emulator-clock".into())
+                .spawn(move || clock(world, speedup, stop))
+                .map_err(|source| RobotIoError::Io {
+                    context: "starting the emulator's clock thread".into(),
+                    source,
+                })?
+        };
         let tasks = vec![
-            tokio::spawn(ticker(world.clone(), cfg.speedup)),
             tokio::spawn(serve_rtde(rtde, world.clone(), cfg.clone(), paused.clone())),
             tokio::spawn(serve_dashboard(dash, world.clone(), paused.clone())),
             tokio::spawn(serve_script(
@@ -1282,6 +1298,8 @@ impl Emulator {
         Ok(Emulator {
             world,
             tasks,
+            clock: Mutex::new(Some(clock)),
+            clock_stop,
             pause,
             rtde: rtde_addr,
             dashboard: dash_addr,
@@ -1390,6 +1408,12 @@ impl Emulator {
         for t in &self.tasks {
             t.abort();
         }
+        self.clock_stop.store(true, Ordering::Release);
+        let handle = self.clock.lock().unwrap_or_else(|e| e.into_inner()).take();
+        if let Some(h) = handle {
+            // The clock sleeps at most one cycle (2 ms / speedup) before it sees the flag.
+            let _ = h.join();
+        }
     }
 }
 
@@ -1405,44 +1429,61 @@ impl Drop for Emulator {
     }
 }
 
-/// One 2 ms wall-clock tick [ns].
-const TICK_NS: u64 = 2_000_000;
+/// One controller cycle [ns] (at speedup 1).
+const CYCLE_NS: u64 = 2_000_000;
 
-/// The clock: tick n is due at start + n · 2 ms (absolute, so lateness does not accumulate as
-/// it did with a delayed interval: under load the virtual clock ran at 0.56–0.85 of wall
-/// time). Each wake runs the ticks due since the last one, within [`max_ticks_per_wake`];
-/// while paused, due ticks are skipped and counted as paused.
-async fn ticker(world: Arc<Mutex<World>>, speedup: u32) {
-    let speedup_cycles = u64::from(speedup);
-    let max = max_ticks_per_wake(speedup);
-    let start = tokio::time::Instant::now();
+/// Wall time since the start at which cycle `n` is due at `speedup`: n · 2 ms / speedup.
+fn cycle_due_at(n: u64, speedup: u64) -> Duration {
+    let ns = u128::from(n) * u128::from(CYCLE_NS) / u128::from(speedup.max(1));
+    Duration::from_nanos(u64::try_from(ns).unwrap_or(u64::MAX))
+}
+
+/// The clock, on its own OS thread (`emulator-clock`) so that it is paced like a controller
+/// and not by an async timer: cycle n is due at start + n · 2 ms / speedup (absolute, so
+/// lateness does not accumulate as it did with a delayed interval: under load the virtual
+/// clock ran at 0.56–0.85 of wall time). Each wake runs the cycles due since the last one,
+/// within [`max_cycles_per_wake`]; while paused, due cycles are skipped and counted as paused.
+///
+/// One cycle per wake is what a client sees from a real controller: one sample every cycle
+/// period and the rest of the period to answer. Until issue 10 the clock ran `speedup` cycles
+/// in a burst every 2 ms on tokio's 1 ms timer, so at `--speedup 4` every command met 0–3
+/// cycles the program had already run without it, varying from command to command (the
+/// executed jerk showed it; `BENCHMARKS.md`, emulator clock).
+fn clock(world: Arc<Mutex<World>>, speedup: u32, stop: Arc<AtomicBool>) {
+    let per = u64::from(speedup.max(1));
+    let max = max_cycles_per_wake(speedup);
+    let start = Instant::now();
     let mut done: u64 = 0;
-    loop {
-        let next = start + Duration::from_nanos(TICK_NS.saturating_mul(done.saturating_add(1)));
-        tokio::time::sleep_until(next).await;
-        let elapsed = u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX);
-        let due = (elapsed / TICK_NS).max(done);
+    while !stop.load(Ordering::Acquire) {
+        let next = cycle_due_at(done.saturating_add(1), per);
+        if let Some(wait) = next.checked_sub(start.elapsed()) {
+            std::thread::sleep(wait);
+        }
+        let elapsed = u128::from(u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX));
+        let due = u64::try_from(elapsed * u128::from(per) / u128::from(CYCLE_NS))
+            .unwrap_or(u64::MAX)
+            .max(done);
         let mut w = lock(&world);
-        w.clock.ticks_elapsed = due;
+        w.clock.cycles_elapsed = due;
         if w.paused {
-            w.clock.cycles_paused += (due - done) * speedup_cycles;
+            w.clock.cycles_paused += due - done;
             done = due;
             continue;
         }
         let plan = plan_ticks(due, done, max);
-        w.clock.max_behind_cycles = w.clock.max_behind_cycles.max((due - done) * speedup_cycles);
-        for _ in 0..plan.run * speedup_cycles {
+        w.clock.max_behind_cycles = w.clock.max_behind_cycles.max(due - done);
+        for _ in 0..plan.run {
             w.step();
         }
-        w.clock.cycles_run += plan.run * speedup_cycles;
-        w.clock.cycles_late += plan.late * speedup_cycles;
-        w.clock.cycles_dropped += plan.dropped * speedup_cycles;
+        w.clock.cycles_run += plan.run;
+        w.clock.cycles_late += plan.late;
+        w.clock.cycles_dropped += plan.dropped;
         if plan.dropped > 0 {
             tracing::warn!(
                 "emulator: clock {} ms behind wall time; dropped {} cycles (at most {max} \
-                 ticks caught up per wake)",
-                (due - done) * TICK_NS / 1_000_000,
-                plan.dropped * speedup_cycles
+                 cycles caught up per wake)",
+                cycle_due_at(due - done, per).as_millis(),
+                plan.dropped
             );
         }
         done = due;

@@ -8,7 +8,7 @@
 //!
 //! # servoj feedforward and extrapolation
 //! A servo target that arrives late, or that the robot keeps for several cycles (the client
-//! missed a cycle; the emulator at `speedup` N runs N cycles per burst), would be held: the
+//! missed a cycle; the emulator catches up after a stall in a burst), would be held: the
 //! target becomes a staircase and every stair a velocity jump. So each servo command carries a
 //! [`ServoFeedforward`]: the joint velocity `qd` [rad/s] and acceleration `qdd` [rad/s²] of the
 //! commanded trajectory at the command's time, and the program cycle `valid_tick` the target

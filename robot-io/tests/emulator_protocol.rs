@@ -9,7 +9,7 @@ use std::time::Duration;
 use robot_io::codec::{ClientPackage, ControllerPackage, DataPackage, FieldType, Value};
 use robot_io::emulator::{
     ClockStats, Emulator, EmulatorConfig, MAX_DASHBOARD_LINE, ReplayMode, SimBackend, TickPlan,
-    TraceBackend, max_ticks_per_wake, plan_ticks,
+    TraceBackend, max_cycles_per_wake, plan_ticks,
 };
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::trace::Trace;
@@ -296,8 +296,8 @@ async fn trace_replay_sends_the_first_row_first() {
     .expect("test timed out");
 }
 
-/// The clock's per-wake schedule, with exact numbers: on time one tick runs; after missed
-/// ticks the backlog runs (all but the newest late); beyond the bound the excess is dropped,
+/// The clock's per-wake schedule (in controller cycles), with exact numbers: on time one
+/// cycle runs; after missed cycles the backlog runs (all but the newest late); beyond the bound the excess is dropped,
 /// never deferred; nothing is due, nothing runs. `done + run + dropped == due` throughout.
 #[test]
 fn the_clock_catches_up_missed_ticks_within_the_bound_and_counts_the_rest_dropped() {
@@ -317,35 +317,31 @@ fn the_clock_catches_up_missed_ticks_within_the_bound_and_counts_the_rest_droppe
         let p = plan_ticks(due, done, 50);
         assert_eq!(done + p.run + p.dropped, due, "due {due}, done {done}");
     }
-    // The bound: 100 ms of wall time, and at most 1000 cycles.
-    assert_eq!(max_ticks_per_wake(1), 50);
-    assert_eq!(max_ticks_per_wake(20), 50);
-    assert_eq!(max_ticks_per_wake(40), 25);
-    assert_eq!(max_ticks_per_wake(100), 10);
-    assert_eq!(max_ticks_per_wake(u32::MAX), 1);
+    // The bound: the cycles of 100 ms of wall time (50 × speedup), and at most 1000.
+    assert_eq!(max_cycles_per_wake(0), 50, "speedup 0 counts as 1");
+    assert_eq!(max_cycles_per_wake(1), 50);
+    assert_eq!(max_cycles_per_wake(4), 200);
+    assert_eq!(max_cycles_per_wake(20), 1000);
+    assert_eq!(max_cycles_per_wake(100), 1000);
+    assert_eq!(max_cycles_per_wake(u32::MAX), 1000);
 }
 
-/// Checks the clock invariants of [`ClockStats`] on `s` at `speedup`.
-fn consistent(s: ClockStats, speedup: u64) -> ClockStats {
+/// Checks the clock invariants of [`ClockStats`] on `s`.
+fn consistent(s: ClockStats) -> ClockStats {
     assert_eq!(
         s.cycles_run + s.cycles_dropped + s.cycles_paused,
-        s.ticks_elapsed * speedup,
+        s.cycles_elapsed,
         "{s:?}"
     );
     assert!(s.cycles_late <= s.cycles_run, "{s:?}");
-    assert_eq!(s.cycles_run % speedup, 0, "whole ticks run: {s:?}");
     s
 }
 
 /// Polls the clock (every millisecond) until `cond` holds, checking its invariants at every
 /// read; the caller's timeout bounds it.
-async fn clock_until(
-    emu: &Emulator,
-    speedup: u64,
-    cond: impl Fn(ClockStats) -> bool,
-) -> ClockStats {
+async fn clock_until(emu: &Emulator, cond: impl Fn(ClockStats) -> bool) -> ClockStats {
     loop {
-        let s = consistent(emu.clock_stats(), speedup);
+        let s = consistent(emu.clock_stats());
         if cond(s) {
             return s;
         }
@@ -354,8 +350,8 @@ async fn clock_until(
 }
 
 /// The emulator's clock counters stay consistent through a pause: at every read, cycles run
-/// + dropped + paused is exactly the wall-clock ticks elapsed × speedup; while paused no
-/// cycle runs and the skipped ticks count as paused (not late, not dropped); after resuming
+/// + dropped + paused is exactly the cycles due by wall time × speedup; while paused no
+/// cycle runs and the skipped cycles count as paused (not late, not dropped); after resuming
 /// cycles run again and nothing more counts as paused. No wall-clock threshold is asserted.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn clock_counters_are_consistent_through_pause_and_resume() {
@@ -366,13 +362,13 @@ async fn clock_counters_are_consistent_through_pause_and_resume() {
             ..EmulatorConfig::ephemeral()
         })
         .await;
-        let running = clock_until(&emu, SPEEDUP, |s| s.cycles_run > 0).await;
+        let running = clock_until(&emu, |s| s.cycles_run > 0).await;
         assert_eq!(running.cycles_paused, 0);
         assert!(emu.cycle() >= running.cycles_run);
 
         emu.pause();
-        let first = clock_until(&emu, SPEEDUP, |s| s.cycles_paused > 0).await;
-        let later = clock_until(&emu, SPEEDUP, |s| s.cycles_paused > first.cycles_paused).await;
+        let first = clock_until(&emu, |s| s.cycles_paused > 0).await;
+        let later = clock_until(&emu, |s| s.cycles_paused > first.cycles_paused).await;
         assert_eq!(
             later.cycles_run, first.cycles_run,
             "a cycle ran while paused"
@@ -380,11 +376,11 @@ async fn clock_counters_are_consistent_through_pause_and_resume() {
         assert_eq!(emu.cycle(), later.cycles_run);
 
         emu.resume();
-        let resumed = clock_until(&emu, SPEEDUP, |s| s.cycles_run > later.cycles_run).await;
-        let after = clock_until(&emu, SPEEDUP, |s| s.cycles_run > resumed.cycles_run).await;
+        let resumed = clock_until(&emu, |s| s.cycles_run > later.cycles_run).await;
+        let after = clock_until(&emu, |s| s.cycles_run > resumed.cycles_run).await;
         assert_eq!(
             after.cycles_paused, resumed.cycles_paused,
-            "ticks counted as paused after resuming"
+            "cycles counted as paused after resuming"
         );
         assert!(emu.cycle() >= after.cycles_run);
     })

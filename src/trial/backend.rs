@@ -250,7 +250,8 @@ pub(crate) fn start_emulator(
         // real controller's 100 ms of *wall* time between command writes (at speedup 4, a
         // 25 ms stall of this process, e.g. under a parallel build, would otherwise stop it).
         // The servo extrapolation bound likewise covers 3 cycles of *wall* time: at speedup 4
-        // each command is held for a burst of 4 cycles, and must be extrapolated through it.
+        // a cycle lasts 0.5 ms of wall time, so a stall of this process that the real
+        // controller's 6 ms would ride out spans 12 cycles, and must be extrapolated through.
         let map = RegisterMap {
             watchdog_hz: RegisterMap::default().watchdog_hz / f64::from(speedup.max(1)),
             extrapolate_max_s: RegisterMap::default().extrapolate_max_s * f64::from(speedup.max(1)),

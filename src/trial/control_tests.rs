@@ -207,9 +207,10 @@ fn the_control_cycle_allocates_nothing_over_rtde_to_the_emulator() {
     let setup = load_setup(&spec, &choice, &CueSource::Simulated, out.path()).unwrap();
     let (robot, guard) =
         super::super::backend::start_emulator(setup.ctl_cfg.task.home_q_rad, 10).unwrap();
-    // Wall-clock paced (2 ms per 10 controller cycles): 2,500 cycles ≈ 5 s of wall time, long
-    // enough to fetch, approach and present.
-    let run = run_handovers(robot, setup, out.path(), 2_500, false);
+    // Paced by the emulator's clock (one controller cycle per 0.2 ms of wall time): 25,000
+    // cycles are at least 50 s of trial time (≈ 5 s of wall time; more trial time where the
+    // loop skips samples), long enough to fetch, approach and present.
+    let run = run_handovers(robot, setup, out.path(), 25_000, false);
     guard.close();
     check(&run, "RTDE client and emulator");
 }
