@@ -251,6 +251,12 @@ impl ControlLog {
         )
     }
 
+    /// Records the ring has room for now [-] (tests).
+    #[cfg(test)]
+    pub(crate) fn free_slots(&self) -> usize {
+        self.producer.slots()
+    }
+
     fn push(&mut self, rec: HotRecord) -> crate::Result<()> {
         if self.producer.push(rec).is_err() {
             self.dropped

@@ -24,6 +24,7 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use adapt::controller::{
@@ -46,7 +47,7 @@ use super::cues::{CueSource, RecordedCues};
 use super::events::TrialEvent;
 #[cfg(feature = "vision")]
 use super::live::LiveCues;
-use super::log::{ControlLog, ControlSink, LogOptions, TrialLog, TrialMeta};
+use super::log::{ControlLog, ControlLogReader, ControlSink, LogOptions, TrialLog, TrialMeta};
 use super::operator::{Level, RobotView, SimulatedOperator};
 use crate::Error;
 use crate::error::ResultExt as _;
@@ -872,6 +873,12 @@ impl CueRunner {
         }
     }
 
+    /// Whether a cue frame is due at the snapshot's trial time.
+    fn is_due(&self, robot: &RobotSnapshot) -> bool {
+        // Frame n is due at cycle ceil(n / rate / 2 ms): integer test k·2ms·rate ≥ n.
+        robot.t_s * self.rate + 1e-9 >= self.next as f64
+    }
+
     /// Runs the cue frame due at the snapshot's trial time, if one is (one per call), and
     /// shows it: `Nothing` (none due), `New`, or `Ended` (`cues_ended`: the source ended;
     /// `completed`: the work is done).
@@ -882,8 +889,7 @@ impl CueRunner {
         log: &mut TrialLog,
         progress: &mut dyn FnMut(&Live),
     ) -> crate::Result<CueExchange> {
-        // Frame n is due at cycle ceil(n / rate / 2 ms): integer test k·2ms·rate ≥ n.
-        if robot.t_s * self.rate + 1e-9 < self.next as f64 {
+        if !self.is_due(robot) {
             return Ok(CueExchange::Nothing);
         }
         let tc = self.next as f64 / self.rate;
@@ -1245,11 +1251,14 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
 ///   through a triple buffer: wait-free, the newest value wins.
 /// - Cue → control: the newest [`CueOutput`] (and whether the cues are over), likewise.
 /// - Control → log: the control cycle's records through a [`ControlLog`] (a wait-free ring),
-///   absorbed into the trial log by the cue thread, which owns it.
+///   drained into the trial log by the `log-writer` thread every [`WRITER_POLL_MS`], and by
+///   the cue thread before each of its own log calls (both under one lock: the log stays in
+///   time order, and the control thread never takes it).
 ///
-/// The control thread never waits for the cue thread and allocates nothing per cycle; the cue
-/// thread polls every millisecond and runs the cue frames due at the robot's trial time, as the
-/// inline link does on the mock clock.
+/// The control thread never waits for the cue thread or the log and allocates nothing per
+/// cycle; the cue thread polls every millisecond, runs the cue frames due at the robot's trial
+/// time, as the inline link does on the mock clock, and takes the log only when it has
+/// something to write.
 mod threaded {
     use super::*;
 
@@ -1257,6 +1266,9 @@ mod threaded {
     const CONTROL_LOG_RECORDS: usize = 8192;
     /// How long the cue thread sleeps when nothing is due [ms].
     const CUE_POLL_MS: u64 = 1;
+    /// How often the log-writer thread drains the ring [ms]: 10 ms is 20 records a cycle's
+    /// worth at speedup 4, far from [`CONTROL_LOG_RECORDS`].
+    const WRITER_POLL_MS: u64 = 10;
 
     #[derive(Debug, Clone, Copy, Default)]
     pub(super) struct ToCue {
@@ -1338,6 +1350,40 @@ mod threaded {
         (link, to_cue_out, from_cue_in)
     }
 
+    /// The trial log and the reading end of the control thread's ring, shared by the
+    /// log-writer thread (which drains the ring) and the cue thread (which drains it before
+    /// each of its own log calls, so the log stays in time order).
+    pub(super) struct LogSink<'a> {
+        pub(super) log: &'a mut TrialLog,
+        pub(super) reader: ControlLogReader,
+    }
+
+    impl LogSink<'_> {
+        fn absorb(&mut self) -> crate::Result<()> {
+            self.log.absorb(&mut self.reader)
+        }
+    }
+
+    fn lock_sink<'a, 'b>(sink: &'a Mutex<LogSink<'b>>) -> MutexGuard<'a, LogSink<'b>> {
+        // A panic while holding it is reported by the thread that panicked; the log itself
+        // stays usable (every write is a whole record).
+        sink.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The log-writer thread: drains the control thread's ring into the trial log every
+    /// [`WRITER_POLL_MS`] (chunk compression and file writes happen here, off the control
+    /// thread and off the cue cycle's frames) until `stop`, then once more.
+    pub(super) fn log_writer(sink: &Mutex<LogSink<'_>>, stop: &AtomicBool) -> crate::Result<()> {
+        loop {
+            let last = stop.load(Ordering::Acquire);
+            lock_sink(sink).absorb()?;
+            if last {
+                return Ok(());
+            }
+            std::thread::sleep(Duration::from_millis(WRITER_POLL_MS));
+        }
+    }
+
     pub(super) fn run<R: TrialRobot + Send>(
         plan: &LoopPlan<'_>,
         cc: &mut ControlCycle<R>,
@@ -1348,8 +1394,29 @@ mod threaded {
     ) -> LoopEnd {
         let (to_cue_in, mut to_cue_out) = triple_buffer::triple_buffer(&ToCue::default());
         let (mut from_cue_in, from_cue_out) = triple_buffer::triple_buffer(&FromCue::default());
-        let (mut control_log, mut reader) = ControlLog::new(CONTROL_LOG_RECORDS);
+        let (mut control_log, reader) = ControlLog::new(CONTROL_LOG_RECORDS);
+        let sink = Mutex::new(LogSink { log, reader });
+        let writer_stop = AtomicBool::new(false);
+        let failed_to_start = |name, source| LoopEnd {
+            reason: reason::ERROR,
+            detail: None,
+            failure: Some(Error::Thread { name, source }),
+            t_end: 0.0,
+        };
         std::thread::scope(|scope| {
+            let (sink, writer_stop) = (&sink, &writer_stop);
+            let spawned = std::thread::Builder::new()
+                .name("log-writer".into())
+                .spawn_scoped(scope, move || {
+                    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                        log_writer(sink, writer_stop)
+                    }))
+                    .unwrap_or_else(|p| Err(Error::panic("the log-writer thread", p.as_ref())))
+                });
+            let writer = match spawned {
+                Ok(handle) => handle,
+                Err(e) => return failed_to_start("log-writer thread", e),
+            };
             let spawned = std::thread::Builder::new()
                 .name("control".into())
                 .spawn_scoped(scope, move || {
@@ -1367,15 +1434,8 @@ mod threaded {
             let control = match spawned {
                 Ok(handle) => handle,
                 Err(e) => {
-                    return LoopEnd {
-                        reason: reason::ERROR,
-                        detail: None,
-                        failure: Some(Error::Thread {
-                            name: "control thread",
-                            source: e,
-                        }),
-                        t_end: 0.0,
-                    };
+                    writer_stop.store(true, Ordering::Release);
+                    return failed_to_start("control thread", e);
                 }
             };
             let mut runner = CueRunner::new(plan.cfg.cue_rate_hz, plan.n_handovers);
@@ -1384,23 +1444,39 @@ mod threaded {
                     let (mut frames, mut handled) = (0u64, 0u32);
                     let mut ended = false;
                     loop {
-                        log.absorb(&mut reader)?;
+                        if writer.is_finished() {
+                            // Its own error is chained in after the join, below.
+                            return Err(Error::Internal {
+                                reason: "the log-writer thread ended before the trial".into(),
+                            });
+                        }
                         let to = *to_cue_out.read();
                         // Over, or the control thread is gone without saying so (a panic
                         // outside its own catch): never wait for it.
                         if to.over || control.is_finished() {
                             return Ok(());
                         }
+                        runner.link_down(to.link_down_s, progress);
+                        let due = !ended && runner.is_due(&to.robot);
+                        if !due && handled >= to.released {
+                            std::thread::sleep(Duration::from_millis(CUE_POLL_MS));
+                            continue;
+                        }
+                        // Something to log: the control thread's records first, so that the
+                        // log stays in time order.
+                        let mut guard = lock_sink(sink);
+                        guard.absorb()?;
+                        let log = &mut *guard.log;
                         while handled < to.released {
                             cue.source.released(to.last_release_t_s, log)?;
                             handled += 1;
                         }
-                        runner.link_down(to.link_down_s, progress);
-                        let step = if ended {
-                            CueExchange::Nothing
-                        } else {
+                        let step = if due {
                             runner.run_due(cue, &to.robot, log, progress)?
+                        } else {
+                            CueExchange::Nothing
                         };
+                        drop(guard);
                         match step {
                             CueExchange::Nothing => {
                                 std::thread::sleep(Duration::from_millis(CUE_POLL_MS));
@@ -1430,13 +1506,14 @@ mod threaded {
                 Err(p) => Some(Error::panic("the cue cycle", p.as_ref())),
             };
             if cue_failure.is_some() {
-                // End the control loop (it stops the robot), keeping its log flowing meanwhile.
+                // End the control loop (it stops the robot), keeping its log flowing meanwhile
+                // (here too, in case the log writer is the one that failed).
                 from_cue_in.write(FromCue {
                     ended: Some(reason::ERROR),
                     ..FromCue::default()
                 });
                 while !to_cue_out.read().over && !control.is_finished() {
-                    let _ = log.absorb(&mut reader);
+                    let _ = lock_sink(sink).absorb();
                     std::thread::sleep(Duration::from_millis(CUE_POLL_MS));
                 }
             }
@@ -1449,7 +1526,14 @@ mod threaded {
                     t_end: 0.0,
                 },
             };
-            if let Err(e) = log.absorb(&mut reader) {
+            writer_stop.store(true, Ordering::Release);
+            let written = writer
+                .join()
+                .unwrap_or_else(|p| Err(Error::panic("the log-writer thread", p.as_ref())));
+            // The writer's last drain, or (when it failed) one here: nothing the control
+            // thread queued is left behind.
+            let drained = written.and_then(|()| lock_sink(sink).absorb());
+            if let Err(e) = drained {
                 end.reason = reason::ERROR;
                 end.failure = Some(chain(end.failure.take(), e));
             }
