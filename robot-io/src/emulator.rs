@@ -1364,6 +1364,11 @@ impl Emulator {
         lock(&self.world).silent = silent;
     }
 
+    /// The input registers as clients last wrote them (a copy).
+    pub fn inputs(&self) -> InputRegisters {
+        lock(&self.world).inputs.clone()
+    }
+
     /// Runs `f` on the backend (under the world lock: keep it short).
     pub fn with_backend<R>(&self, f: impl FnOnce(&mut dyn EmulatorBackend) -> R) -> R {
         f(lock(&self.world).backend.as_mut())

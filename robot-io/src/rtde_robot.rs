@@ -129,8 +129,33 @@ pub struct RtdeRobot {
     /// The program tick of the last decoded sample, and of the last state returned.
     last_tick: i32,
     read_tick: i32,
+    /// The program tick and controller time \[s\] the last servo command was meant for
+    /// (`None` after a non-servo command).
+    last_valid: Option<(i32, f64)>,
     /// Feedforward of the servo commands ([`Robot::send`]).
     feedforward: FeedforwardEstimator,
+}
+
+/// The most cycles a servo command is stamped ahead of the newest state read + 1 [-]: a caller
+/// that sends once per cycle while no new state arrives (its own clock predicting the robot's)
+/// gets consecutive ticks for its consecutive commands; a lead beyond this (a restarted
+/// program, whose tick began again at 0) falls back to the state's tick + 1.
+pub const MAX_SERVO_LEAD_CYCLES: i32 = 8;
+
+/// The program tick and controller time \[s\] a servo command is meant for: the cycle after the
+/// last state read (`read_tick` + 1 at `read_ts` + one cycle), or, when the previous servo
+/// command `last_valid` was already meant for that cycle or a later one (the state was read
+/// again, no newer one having arrived), the cycle after that command. So a caller that predicts
+/// one cycle per call while samples are late, as the controller does, stamps each command with
+/// the tick its target is for, and never two commands with the same tick.
+pub fn servo_slot(read_tick: i32, read_ts: f64, last_valid: Option<(i32, f64)>) -> (i32, f64) {
+    let fresh = (read_tick.wrapping_add(1), read_ts + CONTROLLER_CYCLE_S);
+    match last_valid {
+        Some((tick, t)) if (0..MAX_SERVO_LEAD_CYCLES).contains(&tick.wrapping_sub(fresh.0)) => {
+            (tick.wrapping_add(1), t + CONTROLLER_CYCLE_S)
+        }
+        _ => fresh,
+    }
 }
 
 impl RtdeRobot {
@@ -187,8 +212,14 @@ impl RtdeRobot {
             tick_slot,
             last_tick: 0,
             read_tick: 0,
+            last_valid: None,
             feedforward: FeedforwardEstimator::new(cfg.registers.feedforward_max_gap_s()),
         })
+    }
+
+    /// The register protocol in use (its extrapolation bound, watchdog and registers).
+    pub fn registers(&self) -> &RegisterMap {
+        &self.map
     }
 
     /// The underlying client (link state, reconnects, controller version).
@@ -346,21 +377,27 @@ impl Robot for RtdeRobot {
     ///
     /// # Feedforward
     /// A servo target is taken as valid at the timestamp of the last state `read_state` (or
-    /// `wait_state`) returned plus one cycle; its velocity and acceleration are those of the
-    /// parabola through the last three servo targets at those times
+    /// `wait_state`) returned plus one cycle, and its valid tick is the program tick of that
+    /// state + 1 (the program's next cycle after it); when that state was returned again (no
+    /// newer one had arrived) and the previous servo command was already meant for that cycle,
+    /// the cycle after the previous command ([`servo_slot`]). Its velocity and acceleration are
+    /// those of the parabola through the last three servo targets at those times
     /// ([`FeedforwardEstimator`], restarted by a non-servo command, a gap longer than
-    /// [`RegisterMap::feedforward_max_gap_s`] or a timestamp going back). Its valid tick is
-    /// the program tick of that state + 1 (the program's next cycle after it): the program
-    /// extrapolates by the time since then on its own clock, however late the target arrives.
+    /// [`RegisterMap::feedforward_max_gap_s`] or a timestamp going back). The program
+    /// extrapolates by the time since the valid tick on its own clock, however late the target
+    /// arrives.
     fn send(&mut self, cmd: &JointCommand) -> Result<()> {
         self.seq = self.seq.wrapping_add(1);
         let ff = match cmd {
             JointCommand::Servo { q, .. } => {
-                let mut ff = self.feedforward.push(self.read_ts + CONTROLLER_CYCLE_S, q);
-                ff.valid_tick = self.read_tick.wrapping_add(1);
+                let (tick, t) = servo_slot(self.read_tick, self.read_ts, self.last_valid);
+                self.last_valid = Some((tick, t));
+                let mut ff = self.feedforward.push(t, q);
+                ff.valid_tick = tick;
                 ff
             }
             JointCommand::Speed { .. } | JointCommand::Stop { .. } => {
+                self.last_valid = None;
                 self.feedforward.reset();
                 ServoFeedforward::ZERO
             }

@@ -15,7 +15,8 @@
 //! is meant for. The program counts its loop iterations (one per servoj time t, 2 ms, while it
 //! servos) in `tick` and publishes it every iteration in `output_int_register_<int_base>`; the
 //! client reads it with each state sample and sends `valid_tick` = the tick of the sample its
-//! target was computed from + 1. On every cycle the program servos to
+//! target was computed from + 1 (or the previous command's + 1 when no newer sample came:
+//! [`crate::rtde_robot::servo_slot`]). On every cycle the program servos to
 //!
 //! ```text
 //! target_j = q_j + qd_j·e_j + ½·qdd_j·e_j²,   δ = clamp((tick − valid_tick)·t, 0, extrapolate_max_s)

@@ -8,8 +8,8 @@
 use std::time::Duration;
 
 use robot_io::emulator::{Emulator, EmulatorConfig, SimBackend};
-use robot_io::rtde_robot::{RtdeRobot, RtdeRobotConfig};
-use robot_io::script::{RegisterMap, ScriptSender};
+use robot_io::rtde_robot::{MAX_SERVO_LEAD_CYCLES, RtdeRobot, RtdeRobotConfig, servo_slot};
+use robot_io::script::{INT_REGISTERS, RegisterMap, ScriptSender};
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Joints, Robot, RobotState, runtime_state};
 
@@ -141,6 +141,84 @@ async fn send_does_not_consume_samples() {
             );
             prev = s.timestamp_s;
         }
+    })
+    .await
+    .expect("test timed out");
+}
+
+/// The stamp of a servo command, worked by hand (2 ms cycles): after a state of tick 100 at
+/// 1.000 s the command is for tick 101 at 1.002 s; read again with no newer state, the next
+/// command is for 102 at 1.004 s, and one more for 103; a newer state (tick 104) takes over
+/// again. A state that comes late, after the caller has already predicted past it (tick 101
+/// when the last command was for 102), gives 103: never two commands for one tick. A lead of
+/// more than MAX_SERVO_LEAD_CYCLES (a restarted program counts from 0 again) falls back to
+/// the state's tick + 1; ticks wrap as the program's i32 counter does.
+#[test]
+fn servo_commands_are_stamped_with_consecutive_ticks_when_no_newer_state_arrived() {
+    let close = |(a, t): (i32, f64), (b, u): (i32, f64)| a == b && (t - u).abs() < 1e-12;
+    let first = servo_slot(100, 1.000, None);
+    assert!(close(first, (101, 1.002)), "{first:?}");
+    let again = servo_slot(100, 1.000, Some(first));
+    assert!(close(again, (102, 1.004)), "{again:?}");
+    let third = servo_slot(100, 1.000, Some(again));
+    assert!(close(third, (103, 1.006)), "{third:?}");
+    let newer = servo_slot(104, 1.008, Some(third));
+    assert!(close(newer, (105, 1.010)), "{newer:?}");
+    let late = servo_slot(101, 1.002, Some(again));
+    assert!(close(late, (103, 1.006)), "{late:?}");
+    let lead = MAX_SERVO_LEAD_CYCLES;
+    let far = servo_slot(100, 1.000, Some((101 + lead, 9.0)));
+    assert!(close(far, (101, 1.002)), "{far:?}");
+    let restarted = servo_slot(3, 0.006, Some((5_000, 10.0)));
+    assert!(close(restarted, (4, 0.008)), "{restarted:?}");
+    let wrapped = servo_slot(i32::MAX, 1.0, Some((i32::MAX.wrapping_add(1), 1.002)));
+    assert_eq!(wrapped.0, i32::MIN.wrapping_add(1));
+}
+
+/// Over RTDE: with the emulator's samples held back (`set_rtde_silent`, the program runs on),
+/// `read_state` returns the same state again, and each servo command sent after it reaches the
+/// program's registers with the next tick (before, both carried the state's tick + 1, so a
+/// controller predicting through a late sample had its target applied a cycle early: a step).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn commands_sent_while_no_new_state_arrives_carry_consecutive_valid_ticks() {
+    tokio::time::timeout(TEST_TIMEOUT, async {
+        let map = RegisterMap {
+            watchdog_hz: 1.0,
+            ..RegisterMap::default()
+        };
+        let (emu, mut robot) = setup(1, map).await;
+        let mut s = RobotState::default();
+        robot.wait_state(&mut s, SAMPLE_TIMEOUT).await.unwrap();
+        emu.set_rtde_silent(true);
+        // Whatever was in flight arrives; then nothing new does.
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        robot.read_state(&mut s).unwrap();
+        let q = s.actual_q;
+        let ib = usize::from(map.int_base);
+        let seq0 = emu.inputs().int[ib + 1];
+        let mut ticks = Vec::new();
+        for k in 0..3 {
+            let mut again = RobotState::default();
+            robot.read_state(&mut again).unwrap();
+            assert_eq!(again.timestamp_s, s.timestamp_s, "a new state arrived");
+            robot.send(&servo(q)).unwrap();
+            // Wait until the emulator holds this command (its sequence number).
+            let written = loop {
+                let inputs = emu.inputs();
+                let regs = &inputs.int[ib..ib + INT_REGISTERS];
+                if regs[1] == seq0 + k + 1 {
+                    break regs[2];
+                }
+                tokio::time::sleep(Duration::from_millis(1)).await;
+            };
+            ticks.push(written);
+        }
+        assert_eq!(
+            ticks,
+            [ticks[0], ticks[0] + 1, ticks[0] + 2],
+            "valid ticks of three commands after one state"
+        );
+        emu.set_rtde_silent(false);
     })
     .await
     .expect("test timed out");
