@@ -415,11 +415,6 @@ const SETTLE_DWELL_S: f64 = 0.25;
 /// A robot whose target joint speeds are all below this is at rest for a re-synchronisation
 /// [rad/s].
 const REST_SPEED_RAD_S: f64 = 1e-3;
-/// The most cycles one step catches up after missed cycles [-]: the safety supervisor judges a
-/// servo step over at most this many cycles too (`MAX_COMMAND_PERIOD_CYCLES` in
-/// `safety::supervisor`), so a longer gap delays the plan instead of making its next step look
-/// like a speed jump.
-const MAX_CATCH_UP_CYCLES: f64 = 8.0;
 
 /// Tracks the operator's points between perception frames: last position and a smoothed
 /// velocity per point, for the lookahead's prediction. Allocates nothing.
@@ -797,9 +792,11 @@ impl Controller {
                 } else {
                     last + cycle
                 };
-                let n = ((now - last) / cycle)
-                    .round()
-                    .clamp(1.0, MAX_CATCH_UP_CYCLES);
+                // At most the envelope's catch-up bound (the robot's servo extrapolation + 1,
+                // the longest the supervisor judges a step over): a longer gap delays the plan,
+                // as the robot held its target, instead of making the next target a jump.
+                let max = f64::from(self.cfg.envelope.catch_up_cycles());
+                let n = ((now - last) / cycle).round().clamp(1.0, max);
                 (now, n)
             }
         };

@@ -67,7 +67,14 @@ pub struct SafetyEnvelope {
     separation: SeparationParams,
     arm: ArmModel,
     body: BodyModel,
+    catch_up_cycles: u32,
 }
+
+/// The UR5e's catch-up bound [cycles]: our program extrapolates a servo target for 3 cycles
+/// (6 ms), + 1 (`safety::CatchUpCycles::ur5e`).
+const UR5E_CATCH_UP_CYCLES: u32 = 4;
+/// The largest catch-up bound accepted [cycles] (`safety::CatchUpCycles::MAX`).
+const MAX_CATCH_UP_CYCLES: u32 = 64;
 
 impl SafetyEnvelope {
     /// The envelope from the supervisor's limits: joint speed [rad/s], joint acceleration
@@ -118,6 +125,7 @@ impl SafetyEnvelope {
             separation,
             arm,
             body,
+            catch_up_cycles: UR5E_CATCH_UP_CYCLES,
         };
         if e.stale_perception_scale > 1.0 {
             return Err(AdaptError::InvalidValue {
@@ -150,7 +158,25 @@ impl SafetyEnvelope {
             separation: SeparationParams::handover_default(),
             arm: ArmModel::ur5e_gripper(),
             body: BodyModel::default_adult(),
+            catch_up_cycles: UR5E_CATCH_UP_CYCLES,
         }
+    }
+
+    /// The same envelope with the supervisor's `command_period_cycles` [cycles], in 1..=64
+    /// (4, the UR5e's, unless set): after missed cycles the controller advances its plan by at
+    /// most this many cycles, the longest the supervisor judges one servo step over.
+    ///
+    /// # Errors
+    /// [`AdaptError::InvalidValue`] outside 1..=64.
+    pub fn with_catch_up_cycles(mut self, cycles: u32) -> Result<SafetyEnvelope> {
+        if !(1..=MAX_CATCH_UP_CYCLES).contains(&cycles) {
+            return Err(AdaptError::InvalidValue {
+                key: "envelope.catch_up_cycles".to_owned(),
+                rule: format!("must be in 1..={MAX_CATCH_UP_CYCLES}, got {cycles}"),
+            });
+        }
+        self.catch_up_cycles = cycles;
+        Ok(self)
     }
 
     /// Joint speed cap [rad/s].
@@ -192,6 +218,10 @@ impl SafetyEnvelope {
     /// The operator's body model.
     pub fn body(&self) -> &BodyModel {
         &self.body
+    }
+    /// The most cycles one controller step catches up after missed cycles [cycles].
+    pub fn catch_up_cycles(&self) -> u32 {
+        self.catch_up_cycles
     }
 }
 

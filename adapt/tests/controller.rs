@@ -925,3 +925,46 @@ fn after_a_reduction_it_continues_from_the_sent_command_not_a_step_back() {
     run.run_until(6.0, |r| r.ctl.phase() == Phase::Approach);
     assert!(run.max_servo_acc <= PI, "{}", run.max_servo_acc);
 }
+
+/// After missed cycles the plan advances by the elapsed controller time, up to the envelope's
+/// catch-up bound (the robot's servo extrapolation bound + 1; `safety::CatchUpCycles`). Moving
+/// at speed, one step taken 10 cycles after the previous one commands, with the bound at 4,
+/// exactly what a step taken 4 cycles after it commands (the robot held its target after its
+/// extrapolation: the plan waits instead of jumping); with the bound at 16 the same 10-cycle
+/// step goes further, as far as a 10-cycle step does there. SIMULATED robot.
+#[test]
+fn missed_cycles_advance_the_plan_by_at_most_the_catch_up_bound() {
+    let command_after = |bound: u32, gap: u32| -> (Joints, Joints) {
+        let mut cfg = ControllerConfig::example();
+        cfg.envelope = cfg.envelope.with_catch_up_cycles(bound).unwrap();
+        let mut run = Run::new(cfg, HandScript::Absent, Start::Home);
+        run.ctl.start_handover();
+        run.run_until(1.0, |r| r.samples.len() == 300);
+        assert!(run.state.actual_qd.iter().any(|v| v.abs() > 0.3), "moving");
+        let Some(prev) = run.prev_servo[1] else {
+            panic!("servoing")
+        };
+        run.robot.read_state(&mut run.state).unwrap();
+        let now = run.state.timestamp_s + f64::from(gap - 1) * DT;
+        let view = run.view();
+        run.ctl
+            .step(now, &run.state, &run.adaptation, &view, &mut run.cmd);
+        let JointCommand::Servo { q, .. } = run.cmd else {
+            panic!("a servo command")
+        };
+        (prev, q)
+    };
+    let (prev, late) = command_after(4, 10);
+    let (prev4, at_bound) = command_after(4, 4);
+    assert_eq!(prev, prev4, "the runs are identical up to the gap");
+    assert_eq!(late, at_bound, "a 10-cycle gap advances the plan 4 cycles");
+    let (prev16, wide) = command_after(16, 10);
+    assert_eq!(prev16, prev);
+    let step = |q: &Joints| (0..6).fold(0.0f64, |m, k| m.max((q[k] - prev[k]).abs()));
+    assert!(
+        step(&wide) > 2.0 * step(&late),
+        "10 cycles of plan {} vs 4 cycles {}",
+        step(&wide),
+        step(&late)
+    );
+}

@@ -217,6 +217,52 @@ impl CyclePeriod {
     }
 }
 
+/// The longest controller time a servo step stands for, in control cycles [-], 1..=64: after
+/// missed cycles the planner advances its plan by at most this many cycles and the supervisor
+/// judges the step over at most this long. It should be the robot's servo extrapolation bound in
+/// cycles + 1: until the bound the robot follows the previous target's extrapolation, so a plan
+/// that advances as far stays continuous with it; past the bound the robot holds, and a plan
+/// advanced further would make the next target a jump (which a longer judging period would
+/// pass as slow).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub struct CatchUpCycles(u32);
+
+impl CatchUpCycles {
+    /// The largest value accepted [cycles].
+    pub const MAX: u32 = 64;
+
+    /// `cycles` [cycles], in 1..=[`Self::MAX`].
+    pub fn new(cycles: u32) -> Result<Self> {
+        if (1..=Self::MAX).contains(&cycles) {
+            Ok(Self(cycles))
+        } else {
+            invalid("command_period_cycles", "must be in 1..=64")
+        }
+    }
+
+    /// For a robot that extrapolates a servo target for at most `extrapolate_max_s` [s] at
+    /// control period `cycle_s` [s]: the bound in whole cycles (rounded) + 1, clamped to
+    /// 1..=[`Self::MAX`]; non-finite or non-positive inputs give 1.
+    pub fn for_extrapolation(extrapolate_max_s: f64, cycle_s: f64) -> Self {
+        let n = extrapolate_max_s / cycle_s;
+        if !(n.is_finite() && n >= 0.0 && cycle_s > 0.0) {
+            return Self(1);
+        }
+        // Clamped before the cast: the cast is exact.
+        Self((n.round().min(f64::from(Self::MAX)) as u32 + 1).min(Self::MAX))
+    }
+
+    /// Our control program's bound on a UR5e: 3 cycles (6 ms) + 1 = 4.
+    pub fn ur5e() -> Self {
+        Self(4)
+    }
+
+    /// The value [cycles].
+    pub fn get(&self) -> u32 {
+        self.0
+    }
+}
+
 /// An axis-aligned box in the robot base frame [m] that the TCP, the wrist and the elbow must
 /// stay in.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -332,6 +378,9 @@ impl StalenessLimits {
 pub struct SupervisorConfig {
     /// Control period [s] (2 ms on a UR5e).
     pub cycle: CyclePeriod,
+    /// The longest controller time one servo step is judged over [cycles] (the robot's servo
+    /// extrapolation bound + 1; the planner catches up as far).
+    pub command_period_cycles: CatchUpCycles,
     /// Joint position limits and margin [rad].
     pub joint_limits: JointLimits,
     /// Joint speed [rad/s] and acceleration [rad/s²] limits, stop deceleration [rad/s²].
@@ -356,7 +405,8 @@ pub struct SupervisorConfig {
 
 impl SupervisorConfig {
     /// UR5e defaults:
-    /// - 2 ms cycle; joints ±2π rad with a 0.05 rad margin, π rad/s, π rad/s², stops at
+    /// - 2 ms cycle, a servo step judged over at most 4 cycles ([`CatchUpCycles::ur5e`]);
+    ///   joints ±2π rad with a 0.05 rad margin, π rad/s, π rad/s², stops at
     ///   π rad/s²;
     /// - TCP 1 m/s; 0.25 m/s while collaborating: ISO 10218-1's reduced speed, well under the
     ///   0.68 m/s quasi-static PFL figure for the hand in issue 4, so a hand clamped against
@@ -370,6 +420,7 @@ impl SupervisorConfig {
     pub fn ur5e() -> Self {
         Self {
             cycle: CyclePeriod::ur5e(),
+            command_period_cycles: CatchUpCycles::ur5e(),
             joint_limits: JointLimits::ur5e(),
             joint_rates: JointRateLimits::ur5e(),
             tcp_speed: SpeedLimit(1.0),
@@ -401,6 +452,29 @@ impl Default for SupervisorConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Worked by hand: 6 ms at 2 ms is 3 cycles, + 1 = 4; the emulator's 24 ms at speedup 4
+    /// gives 12 + 1 = 13; 5 ms rounds to 3 (2.5 → 3) + 1 = 4; 0 gives 1; a huge or broken
+    /// bound is clamped, never panics. `new` takes 1..=64 only.
+    #[test]
+    fn catch_up_cycles_are_the_extrapolation_bound_plus_one() {
+        let f = |e, c| CatchUpCycles::for_extrapolation(e, c).get();
+        assert_eq!(f(0.006, 0.002), 4);
+        assert_eq!(f(0.024, 0.002), 13);
+        assert_eq!(f(0.005, 0.002), 4);
+        assert_eq!(f(0.0, 0.002), 1);
+        assert_eq!(f(1e9, 0.002), CatchUpCycles::MAX);
+        assert_eq!(f(f64::NAN, 0.002), 1);
+        assert_eq!(f(0.006, 0.0), 1);
+        assert_eq!(f(-1.0, 0.002), 1);
+        assert_eq!(
+            CatchUpCycles::ur5e(),
+            CatchUpCycles::for_extrapolation(0.006, 0.002)
+        );
+        assert!(CatchUpCycles::new(0).is_err());
+        assert!(CatchUpCycles::new(65).is_err());
+        assert_eq!(CatchUpCycles::new(64).unwrap().get(), 64);
+    }
 
     #[test]
     fn joint_limits_reject_bad_ranges() {

@@ -47,7 +47,7 @@
 //! | SAF-REQ-009 | robot-state staleness | > 3 cycles without a new controller timestamp | stop | `saf_req_009_robot_state_staleness` |
 //! | SAF-REQ-001 | non-finite or malformed command or input (robot state, world view, servoJ lookahead ∉ [0.03, 0.2] s or gain ∉ [100, 2000], speedJ acc ≤ 0, stop decel ≤ 0) | any NaN/∞ | stop (the robot holds) | `saf_req_001_non_finite_values_are_rejected`, `saf_req_001_fault_injection_nan_target` |
 //! | SAF-REQ-008 | perception staleness | age > 0.2 s; > 1 s | reduce the speed caps ×0.25; stop | `saf_req_008_perception_staleness`, `saf_req_008_fault_injection_perception_freeze` |
-//! | SAF-REQ-003 | joint speed implied by the command (servoJ: step / the controller time since the previous servo command, 1–8 cycles of 2 ms; speedJ: `qd`) | π rad/s | reduce | `saf_req_003_joint_speed_limit`, `saf_req_003_ramp_commanded_every_third_cycle_is_judged_over_the_elapsed_time`, `saf_req_003_a_gap_longer_than_8_cycles_is_judged_as_8` |
+//! | SAF-REQ-003 | joint speed implied by the command (servoJ: step / the controller time since the previous servo command, 1 to `command_period_cycles` (4 on a UR5e: its servo extrapolation bound + 1) cycles of 2 ms; speedJ: `qd`) | π rad/s | reduce | `saf_req_003_joint_speed_limit`, `saf_req_003_ramp_commanded_every_third_cycle_is_judged_over_the_elapsed_time`, `saf_req_003_a_gap_longer_than_the_command_period_is_judged_as_that_period`, `saf_req_003_the_default_command_period_is_the_ur5e_extrapolation_bound_plus_one` |
 //! | SAF-REQ-005 | TCP speed implied by the command | 1 m/s; 0.25 m/s while C(t) | reduce | `saf_req_005_tcp_speed_limit` |
 //! | SAF-REQ-004 | joint acceleration (servoJ: change of implied velocity over the same period; speedJ: `acc`) | π rad/s² | reduce (clamp); stop if no scale meets it | `saf_req_004_joint_acceleration_limit`, `saf_req_004_ramp_commanded_every_third_cycle_is_judged_over_the_elapsed_time`, `saf_req_004_a_gap_longer_than_8_cycles_is_judged_as_8` |
 //! | SAF-REQ-002 | joint positions of the target and of the stopping configuration | ±2π rad − 0.05 rad margin | stop | `saf_req_002_joint_position_limits` |
@@ -117,8 +117,8 @@ mod supervisor;
 mod verdict;
 
 pub use config::{
-    CyclePeriod, JointLimits, JointRateLimits, SeparationParams, SpeedLimit, SpeedScale,
-    StalenessLimits, SupervisorConfig, WorkspaceBox,
+    CatchUpCycles, CyclePeriod, JointLimits, JointRateLimits, SeparationParams, SpeedLimit,
+    SpeedScale, StalenessLimits, SupervisorConfig, WorkspaceBox,
 };
 pub use error::{Result, SafetyError};
 pub use robot_io::geometry::{ArmLink, ArmModel, BodyModel, BodyPart, HumanBody, Torso};

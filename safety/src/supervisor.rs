@@ -19,10 +19,6 @@ const SERVO_GAIN_RANGE: (f64, f64) = (100.0, 2000.0);
 const TCP_SCALE_MARGIN: f64 = 1e-3;
 /// Relative tolerance of the final re-check against rounding [-].
 const RECHECK_TOLERANCE: f64 = 1e-9;
-/// A servo step is judged over the controller time elapsed since the previous servo command,
-/// at most this many control cycles (a longer gap is judged as if it were this long, which
-/// overstates the implied speed: conservative) [-].
-const MAX_COMMAND_PERIOD_CYCLES: f64 = 8.0;
 
 /// What the supervisor knows of the world outside the robot in this cycle.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -96,7 +92,9 @@ struct ServoReference {
 struct Motion {
     servo: Option<(f64, f64)>,
     /// The period the command covers [s]: one cycle, or for a servo step the controller time
-    /// since the previous servo command (missed cycles), up to `MAX_COMMAND_PERIOD_CYCLES`.
+    /// since the previous servo command (missed cycles), up to
+    /// `SupervisorConfig::command_period_cycles` (a longer gap is judged as if it were this
+    /// long, which overstates the implied speed: conservative).
     dt_s: f64,
     /// The time over which `v_prev` changes into `v` [s]: for two servo steps, the time
     /// between the middles of their periods, (previous period + this one) / 2 (each implied
@@ -417,6 +415,7 @@ impl<R: Robot> Supervisor<R> {
             input: MalformedInput::CommandValue,
         };
         let cycle = self.config.cycle.seconds();
+        let max_period = f64::from(self.config.command_period_cycles.get()) * cycle;
         match *cmd {
             JointCommand::Stop { .. } => Ok(None),
             JointCommand::Servo {
@@ -439,7 +438,7 @@ impl<R: Robot> Supervisor<R> {
                         let ref_ts = self.state.timestamp_s.max(r.timestamp_s + cycle);
                         let elapsed = ref_ts - r.timestamp_s;
                         let dt = if elapsed.is_finite() {
-                            elapsed.clamp(cycle, MAX_COMMAND_PERIOD_CYCLES * cycle)
+                            elapsed.clamp(cycle, max_period)
                         } else {
                             cycle
                         };

@@ -1,5 +1,5 @@
 //! SAF-REQ-003/004 after missed cycles: a servo step is judged over the controller time since
-//! the previous servo command (1 to 8 cycles), not over one cycle. On `SimRobot` (2 ms mock
+//! the previous servo command (1 to `command_period_cycles`, 4 by default), not over one cycle. On `SimRobot` (2 ms mock
 //! clock), the robot stepping several cycles between the supervisor's reads, as on a loaded
 //! machine. Wrist 3 turns alone (it does not move the TCP, so SAF-REQ-005 stays out of it).
 //! The figures are computed by hand in the comments.
@@ -13,7 +13,9 @@ use std::rc::Rc;
 use common::{DT, Q_WORK, SharedSim, servo};
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Joints, RobotState};
-use safety::{Requirement, Supervisor, SupervisorConfig, Verdict, Violation, WorldView};
+use safety::{
+    CatchUpCycles, Requirement, Supervisor, SupervisorConfig, Verdict, Violation, WorldView,
+};
 
 /// The joint that turns: wrist 3.
 const J: usize = 5;
@@ -25,7 +27,7 @@ struct Rig {
 }
 
 impl Rig {
-    fn new() -> Rig {
+    fn with(cfg: SupervisorConfig) -> Rig {
         let sim = Rc::new(RefCell::new(
             SimRobot::new(SimConfig {
                 initial_q_rad: Q_WORK,
@@ -33,7 +35,7 @@ impl Rig {
             })
             .unwrap(),
         ));
-        let sup = Supervisor::new(SharedSim(sim.clone()), SupervisorConfig::ur5e()).unwrap();
+        let sup = Supervisor::new(SharedSim(sim.clone()), cfg).unwrap();
         Rig {
             sim,
             sup,
@@ -95,9 +97,21 @@ impl Ramp {
 /// A hold at the start pose (the first servo command is judged from the robot's target state
 /// over one cycle; it sets the reference for the elapsed-time rule).
 fn started() -> Rig {
-    let mut rig = Rig::new();
+    started_with(SupervisorConfig::ur5e())
+}
+
+fn started_with(cfg: SupervisorConfig) -> Rig {
+    let mut rig = Rig::with(cfg);
     assert_eq!(rig.command_after(0, Q_WORK), Verdict::Passed);
     rig
+}
+
+/// `command_period_cycles` = 8 (an emulator at speedup 2 extrapolates 7 cycles).
+fn eight_cycles() -> SupervisorConfig {
+    SupervisorConfig {
+        command_period_cycles: CatchUpCycles::new(8).unwrap(),
+        ..SupervisorConfig::ur5e()
+    }
 }
 
 #[test]
@@ -157,15 +171,15 @@ fn saf_req_003_ramp_commanded_every_third_cycle_is_judged_over_the_elapsed_time(
 }
 
 #[test]
-fn saf_req_003_a_gap_longer_than_8_cycles_is_judged_as_8() {
-    // Wrist 3 cruises at 0.99 π rad/s, commanded every 3rd cycle. Then 9 cycles pass without a
+fn saf_req_003_a_gap_longer_than_the_command_period_is_judged_as_that_period() {
+    // With `command_period_cycles` = 8: wrist 3 cruises at 0.99 π rad/s, commanded every 3rd cycle. Then 9 cycles pass without a
     // command, and the next one continues the motion: a step of 0.99 π · 0.018 = 0.055984 rad.
     // Judged over 8 cycles (16 ms, the longest period the rule allows), that is
     // 0.055984 / 0.016 = 3.49895 rad/s = 1.11375 π > π: reduced (conservative) to
     // π / 3.49895 = 0.897868, a step of π · 0.016 = 0.050265 rad. The acceleration check
     // allows this scale: |s · 3.49895 − 3.11018| ≤ π · 0.016 = 0.050265 for s in
     // [0.874524, 0.903250].
-    let mut rig = started();
+    let mut rig = started_with(eight_cycles());
     let mut ramp = Ramp::new(0.99 * PI, 0.5 * PI, 3);
     for _ in 0..400 {
         let q = ramp.next();
@@ -192,7 +206,7 @@ fn saf_req_003_a_gap_longer_than_8_cycles_is_judged_as_8() {
     assert!(step < q[J] - from[J], "the bigger step is reduced");
 
     // The same step after exactly 8 cycles (0.99 π · 0.016 = 0.049763 rad) passes.
-    let mut rig = started();
+    let mut rig = started_with(eight_cycles());
     let mut ramp = Ramp::new(0.99 * PI, 0.5 * PI, 3);
     for _ in 0..400 {
         let q = ramp.next();
@@ -202,6 +216,51 @@ fn saf_req_003_a_gap_longer_than_8_cycles_is_judged_as_8() {
     let q = ramp.next();
     assert_eq!(rig.command_after(8, q), Verdict::Passed);
     assert_eq!(rig.sent(), q);
+}
+
+/// The default, the UR5e's: `command_period_cycles` = 4 (our program extrapolates 3 cycles,
+/// plus 1). At 0.99 π rad/s commanded every 3rd cycle, the motion continued after exactly 4
+/// cycles passes; continued after 5 (a step of 0.99 π · 0.010 = 0.031102 rad) it is judged
+/// over 4 cycles: 0.031102 / 0.008 = 3.88772 rad/s > π. Cut to π (scale 0.808081) the change
+/// from the cruise's 3.11018 rad/s, π − 3.11018 = 0.031416 rad/s over the 7 ms between the
+/// periods' middles ((6 + 8) / 2 ms), is 4.48799 rad/s² > π rad/s²: reduced to the largest
+/// scale the acceleration limit allows, (3.11018 + π · 0.007) / 3.88772 = 0.805661 (by hand;
+/// the supervisor keeps a small margin under it). Judged over 8 cycles it would have passed.
+#[test]
+fn saf_req_003_the_default_command_period_is_the_ur5e_extrapolation_bound_plus_one() {
+    assert_eq!(SupervisorConfig::ur5e().command_period_cycles.get(), 4);
+    let cruise = || {
+        let mut ramp = Ramp::new(0.99 * PI, 0.5 * PI, 3);
+        let mut rig = started();
+        for _ in 0..400 {
+            let q = ramp.next();
+            assert_eq!(rig.command_after(3, q), Verdict::Passed);
+        }
+        (rig, ramp)
+    };
+    let (mut rig, mut ramp) = cruise();
+    ramp.period_s = 4.0 * DT;
+    let q = ramp.next();
+    assert_eq!(rig.command_after(4, q), Verdict::Passed);
+    let (mut rig, mut ramp) = cruise();
+    ramp.period_s = 5.0 * DT;
+    let q = ramp.next();
+    match rig.command_after(5, q) {
+        Verdict::Reduced {
+            scale,
+            violation:
+                Violation::JointAcceleration {
+                    joint,
+                    value_rad_s2,
+                    ..
+                },
+        } => {
+            assert_eq!(joint, J);
+            assert!((value_rad_s2 - 4.487_99).abs() < 1e-4, "{value_rad_s2}");
+            assert!(scale <= 0.805_661 && scale > 0.805_6, "{scale}");
+        }
+        other => panic!("a 5-cycle step judged over 4 cycles: {other:?}"),
+    }
 }
 
 #[test]
@@ -262,8 +321,8 @@ fn saf_req_004_ramp_commanded_every_third_cycle_is_judged_over_the_elapsed_time(
 }
 
 #[test]
-fn saf_req_004_a_gap_longer_than_8_cycles_is_judged_as_8() {
-    // Wrist 3 cruises at 0.5 π rad/s (every 3rd cycle), then 12 cycles pass and the next
+fn saf_req_004_a_gap_longer_than_the_command_period_is_judged_as_that_period() {
+    // With `command_period_cycles` = 8: wrist 3 cruises at 0.5 π rad/s (every 3rd cycle), then 12 cycles pass and the next
     // command continues the motion: a step of 0.5 π · 0.024 = 0.037699 rad. Judged over 8
     // cycles (16 ms) it implies 2.35619 rad/s = 0.75 π, a change of 0.25 π rad/s from the
     // previous 1.570796 rad/s between the middles of the two periods, (6 + 16) / 2 = 11 ms
@@ -271,7 +330,7 @@ fn saf_req_004_a_gap_longer_than_8_cycles_is_judged_as_8() {
     // s = (1.570796 + π · 0.011) / 2.35619 = 0.681333, a step of
     // 0.681333 · 2.35619 · 0.016 = 0.025686 rad. Judged over the real 24 ms it would have
     // passed (0.5 π rad/s, no change): a longer gap is judged conservatively.
-    let mut rig = started();
+    let mut rig = started_with(eight_cycles());
     let mut ramp = Ramp::new(0.5 * PI, 0.5 * PI, 3);
     for _ in 0..200 {
         let q = ramp.next();

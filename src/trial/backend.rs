@@ -142,6 +142,9 @@ impl TrialRobot for PacedRtde {
     fn restart_program(&self) -> bool {
         self.robot.restart_program()
     }
+    fn servo_extrapolation_s(&self) -> Option<f64> {
+        Some(self.robot.registers().extrapolate_max_s)
+    }
 }
 
 /// What keeps an RTDE robot's connection alive: the emulator (`None` for a real robot) and the

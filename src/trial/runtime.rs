@@ -37,7 +37,7 @@ use policies::{Adaptation, PolicyKind, RuleTable, TaskPhase};
 use robot_io::geometry::HumanBody;
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Robot, RobotState};
-use safety::{Supervisor, SupervisorConfig, Verdict, Violation, WorldView};
+use safety::{CatchUpCycles, Supervisor, SupervisorConfig, Verdict, Violation, WorldView};
 
 use super::backend::UrPorts;
 use super::config::TrialConfig;
@@ -335,6 +335,13 @@ pub(crate) trait TrialRobot: Robot + Send {
     /// a restart is still under way). Called only while a resume is being waited for.
     fn restart_program(&self) -> bool {
         false
+    }
+    /// How long the robot extrapolates a servo target that is not refreshed [s], when it
+    /// does (`None`: the UR5e program's default, or a robot that never misses a cycle). The
+    /// planner's catch-up and the supervisor's servo period follow it
+    /// ([`safety::CatchUpCycles::for_extrapolation`]).
+    fn servo_extrapolation_s(&self) -> Option<f64> {
+        None
     }
 }
 
@@ -1553,7 +1560,11 @@ fn control_cycle<R: TrialRobot>(
     robot: R,
     mut ctl_cfg: ControllerConfig,
 ) -> crate::Result<ControlCycle<R>> {
-    let supervisor_cfg = SupervisorConfig::ur5e();
+    let mut supervisor_cfg = SupervisorConfig::ur5e();
+    if let Some(bound_s) = robot.servo_extrapolation_s() {
+        supervisor_cfg.command_period_cycles =
+            CatchUpCycles::for_extrapolation(bound_s, supervisor_cfg.cycle.seconds());
+    }
     ctl_cfg.envelope = planner_envelope(&supervisor_cfg)?;
     Ok(ControlCycle::new(
         Supervisor::new(robot, supervisor_cfg)?,
@@ -1562,7 +1573,8 @@ fn control_cycle<R: TrialRobot>(
 }
 
 /// The planner's [`SafetyEnvelope`]: the supervisor's joint, TCP, collaboration and
-/// staleness limits, its stop deceleration and its separation, arm and body models.
+/// staleness limits, its stop deceleration, its separation, arm and body models, and the
+/// longest period it judges a servo step over (the planner's catch-up bound).
 pub(crate) fn planner_envelope(cfg: &SupervisorConfig) -> crate::Result<SafetyEnvelope> {
     SafetyEnvelope::new(
         cfg.joint_rates.max_speed_rad_s(),
@@ -1576,6 +1588,7 @@ pub(crate) fn planner_envelope(cfg: &SupervisorConfig) -> crate::Result<SafetyEn
         cfg.arm,
         cfg.body,
     )
+    .and_then(|e| e.with_catch_up_cycles(cfg.command_period_cycles.get()))
     .context("the supervisor's limits do not make a planning envelope")
 }
 
