@@ -2,8 +2,8 @@
 //! on configurable ports, backed by [`SimBackend`] (the in-process [`SimRobot`], driven by our
 //! register protocol) or [`TraceBackend`] (a recorded [`Trace`]).
 //!
-//! One clock thread steps the backend in 2 ms controller cycles on a virtual clock: one cycle
-//! every 2 ms / `speedup` of wall time (1 = real time; tests speed it up). The clock keeps
+//! One clock (a tokio task, or at speedup 3 and up an OS thread) steps the backend in 2 ms
+//! controller cycles on a virtual clock: one cycle every 2 ms / `speedup` of wall time (1 = real time; tests speed it up). The clock keeps
 //! absolute cycles (cycle n is due at start + n · 2 ms / speedup) and catches up after missed
 //! ones, within a bound per wake ([`plan_ticks`]); [`Emulator::clock_stats`] reports how far it
 //! fell behind. Each RTDE session
@@ -1196,7 +1196,8 @@ fn input_target(name: &str) -> Option<(Target, FieldType)> {
 pub struct Emulator {
     world: Arc<Mutex<World>>,
     tasks: Vec<JoinHandle<()>>,
-    /// The clock thread ([`clock`]), joined by [`Emulator::shutdown`].
+    /// The clock thread, when it has one ([`clock_on_own_thread`]), joined by
+    /// [`Emulator::shutdown`].
     clock: Mutex<Option<std::thread::JoinHandle<()>>>,
     /// Tells the clock thread to end.
     clock_stop: Arc<AtomicBool>,
@@ -1270,17 +1271,21 @@ impl Emulator {
         let programs = Arc::new(AtomicU64::new(0));
         let (pause, paused) = watch::channel(false);
         let clock_stop = Arc::new(AtomicBool::new(false));
-        let clock = {
-            let (world, stop, speedup) = (world.clone(), clock_stop.clone(), cfg.speedup);
-            std::thread::Builder::new()
+        let ticker = Clock::new(world.clone(), cfg.speedup);
+        let (clock, clock_task) = if clock_on_own_thread(cfg.speedup) {
+            let stop = clock_stop.clone();
+            let thread = std::thread::Builder::new()
                 .name("emulator-clock".into())
-                .spawn(move || clock(world, speedup, stop))
+                .spawn(move || clock_thread(ticker, stop))
                 .map_err(|source| RobotIoError::Io {
                     context: "starting the emulator's clock thread".into(),
                     source,
-                })?
+                })?;
+            (Some(thread), None)
+        } else {
+            (None, Some(tokio::spawn(clock_task(ticker))))
         };
-        let tasks = vec![
+        let mut tasks = vec![
             tokio::spawn(serve_rtde(rtde, world.clone(), cfg.clone(), paused.clone())),
             tokio::spawn(serve_dashboard(dash, world.clone(), paused.clone())),
             tokio::spawn(serve_script(
@@ -1291,6 +1296,7 @@ impl Emulator {
             )),
             tokio::spawn(serve_script(rt, world.clone(), programs.clone(), paused)),
         ];
+        tasks.extend(clock_task);
         tracing::info!(
             "emulator: rtde {rtde_addr}, dashboard {dash_addr}, script {sec_addr} / {rt_addr}: {}",
             lock(&world).backend.describe()
@@ -1298,7 +1304,7 @@ impl Emulator {
         Ok(Emulator {
             world,
             tasks,
-            clock: Mutex::new(Some(clock)),
+            clock: Mutex::new(clock),
             clock_stop,
             pause,
             rtde: rtde_addr,
@@ -1416,7 +1422,7 @@ impl Emulator {
         self.clock_stop.store(true, Ordering::Release);
         let handle = self.clock.lock().unwrap_or_else(|e| e.into_inner()).take();
         if let Some(h) = handle {
-            // The clock sleeps at most one cycle (2 ms / speedup) before it sees the flag.
+            // The clock thread sleeps at most one cycle (< 1 ms) before it sees the flag.
             let _ = h.join();
         }
     }
@@ -1443,39 +1449,70 @@ fn cycle_due_at(n: u64, speedup: u64) -> Duration {
     Duration::from_nanos(u64::try_from(ns).unwrap_or(u64::MAX))
 }
 
-/// The clock, on its own OS thread (`emulator-clock`) so that it is paced like a controller
-/// and not by an async timer: cycle n is due at start + n · 2 ms / speedup (absolute, so
-/// lateness does not accumulate as it did with a delayed interval: under load the virtual
-/// clock ran at 0.56–0.85 of wall time). Each wake runs the cycles due since the last one,
-/// within [`max_cycles_per_wake`]; while paused, due cycles are skipped and counted as paused.
+/// Cycle periods at least this long [ns] are slept on tokio's timer (its resolution is 1 ms);
+/// shorter ones on an OS thread.
+const TOKIO_TIMER_NS: u64 = 1_000_000;
+
+/// Whether the clock at `speedup` needs its own OS thread: a cycle period (2 ms / speedup)
+/// shorter than tokio's 1 ms timer resolution, i.e. speedup 3 and up.
+pub fn clock_on_own_thread(speedup: u32) -> bool {
+    CYCLE_NS / u64::from(speedup.max(1)) < TOKIO_TIMER_NS
+}
+
+/// The emulator's clock: cycle n is due at start + n · 2 ms / speedup (absolute, so lateness
+/// does not accumulate as it did with a delayed interval: under load the virtual clock ran at
+/// 0.56–0.85 of wall time). Each wake runs the cycles due since the last one, within
+/// [`max_cycles_per_wake`]; while paused, due cycles are skipped and counted as paused.
 ///
 /// One cycle per wake is what a client sees from a real controller: one sample every cycle
 /// period and the rest of the period to answer. Until issue 10 the clock ran `speedup` cycles
 /// in a burst every 2 ms on tokio's 1 ms timer, so at `--speedup 4` every command met 0–3
 /// cycles the program had already run without it, varying from command to command (the
-/// executed jerk showed it; `BENCHMARKS.md`, emulator clock).
-fn clock(world: Arc<Mutex<World>>, speedup: u32, stop: Arc<AtomicBool>) {
-    let per = u64::from(speedup.max(1));
-    let max = max_cycles_per_wake(speedup);
-    let start = Instant::now();
-    let mut done: u64 = 0;
-    while !stop.load(Ordering::Acquire) {
-        let next = cycle_due_at(done.saturating_add(1), per);
-        if let Some(wait) = next.checked_sub(start.elapsed()) {
-            std::thread::sleep(wait);
+/// executed jerk showed it; `BENCHMARKS.md`, emulator clock). It sleeps on tokio's timer
+/// where that resolves the period (speedup 1 and 2: the timer wakes a worker that then sends
+/// the samples itself) and on its own OS thread (`emulator-clock`) where it does not
+/// ([`clock_on_own_thread`]; one more thread wake per cycle, which at speedup 1 measurably
+/// delayed the samples: BENCHMARKS.md).
+struct Clock {
+    world: Arc<Mutex<World>>,
+    per: u64,
+    max: u64,
+    start: Instant,
+    done: u64,
+}
+
+impl Clock {
+    fn new(world: Arc<Mutex<World>>, speedup: u32) -> Clock {
+        Clock {
+            world,
+            per: u64::from(speedup.max(1)),
+            max: max_cycles_per_wake(speedup),
+            start: Instant::now(),
+            done: 0,
         }
-        let elapsed = u128::from(u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX));
-        let due = u64::try_from(elapsed * u128::from(per) / u128::from(CYCLE_NS))
+    }
+
+    /// When the next cycle is due.
+    fn next_due(&self) -> Instant {
+        self.start + cycle_due_at(self.done.saturating_add(1), self.per)
+    }
+
+    /// Runs the cycles due now (see [`Clock`]).
+    fn wake(&mut self) {
+        let elapsed =
+            u128::from(u64::try_from(self.start.elapsed().as_nanos()).unwrap_or(u64::MAX));
+        let due = u64::try_from(elapsed * u128::from(self.per) / u128::from(CYCLE_NS))
             .unwrap_or(u64::MAX)
-            .max(done);
-        let mut w = lock(&world);
+            .max(self.done);
+        let done = self.done;
+        self.done = due;
+        let mut w = lock(&self.world);
         w.clock.cycles_elapsed = due;
         if w.paused {
             w.clock.cycles_paused += due - done;
-            done = due;
-            continue;
+            return;
         }
-        let plan = plan_ticks(due, done, max);
+        let plan = plan_ticks(due, done, self.max);
         w.clock.max_behind_cycles = w.clock.max_behind_cycles.max(due - done);
         for _ in 0..plan.run {
             w.step();
@@ -1485,13 +1522,31 @@ fn clock(world: Arc<Mutex<World>>, speedup: u32, stop: Arc<AtomicBool>) {
         w.clock.cycles_dropped += plan.dropped;
         if plan.dropped > 0 {
             tracing::warn!(
-                "emulator: clock {} ms behind wall time; dropped {} cycles (at most {max} \
+                "emulator: clock {} ms behind wall time; dropped {} cycles (at most {} \
                  cycles caught up per wake)",
-                cycle_due_at(due - done, per).as_millis(),
-                plan.dropped
+                cycle_due_at(due - done, self.per).as_millis(),
+                plan.dropped,
+                self.max
             );
         }
-        done = due;
+    }
+}
+
+/// The clock on its own OS thread, until `stop`.
+fn clock_thread(mut clock: Clock, stop: Arc<AtomicBool>) {
+    while !stop.load(Ordering::Acquire) {
+        if let Some(wait) = clock.next_due().checked_duration_since(Instant::now()) {
+            std::thread::sleep(wait);
+        }
+        clock.wake();
+    }
+}
+
+/// The clock as a tokio task (aborted with the emulator's other tasks).
+async fn clock_task(mut clock: Clock) {
+    loop {
+        tokio::time::sleep_until(tokio::time::Instant::from_std(clock.next_due())).await;
+        clock.wake();
     }
 }
 

@@ -4,118 +4,19 @@
 //!
 //! No assertion depends on wall-clock speed: waits are bounded by generous timeouts only.
 
+mod common;
+
 use std::time::Duration;
 
+use common::{REPLY_TIMEOUT, Raw, TEST_TIMEOUT, sim_emulator};
 use robot_io::codec::{ClientPackage, ControllerPackage, DataPackage, FieldType, Value};
 use robot_io::emulator::{
-    ClockStats, Emulator, EmulatorConfig, MAX_DASHBOARD_LINE, ReplayMode, SimBackend, TickPlan,
-    TraceBackend, max_cycles_per_wake, plan_ticks,
+    ClockStats, Emulator, EmulatorConfig, MAX_DASHBOARD_LINE, ReplayMode, TickPlan, TraceBackend,
+    clock_on_own_thread, max_cycles_per_wake, plan_ticks,
 };
-use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::trace::Trace;
-use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
+use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::net::TcpStream;
-
-/// Every test body runs under this bound.
-const TEST_TIMEOUT: Duration = Duration::from_secs(60);
-/// Generous bound on one reply.
-const REPLY_TIMEOUT: Duration = Duration::from_secs(10);
-
-async fn sim_emulator(cfg: EmulatorConfig) -> Emulator {
-    let robot = SimRobot::new(SimConfig::ur5e()).unwrap();
-    Emulator::start(cfg, Box::new(SimBackend::new(robot)))
-        .await
-        .unwrap()
-}
-
-/// A raw RTDE connection: one package out, one package in.
-struct Raw {
-    stream: TcpStream,
-    buf: Vec<u8>,
-}
-
-impl Raw {
-    async fn connect(emu: &Emulator) -> Raw {
-        let stream = TcpStream::connect(emu.rtde_addr()).await.unwrap();
-        stream.set_nodelay(true).unwrap();
-        Raw {
-            stream,
-            buf: Vec::new(),
-        }
-    }
-
-    async fn send(&mut self, pkg: ClientPackage<'_>) {
-        let mut out = Vec::new();
-        pkg.encode(&mut out).unwrap();
-        self.stream.write_all(&out).await.unwrap();
-    }
-
-    /// The next package from the controller (header: u16 big-endian size including the
-    /// header, then the u8 type).
-    async fn recv(&mut self) -> ControllerPackage<'_> {
-        let mut size = [0u8; 2];
-        tokio::time::timeout(REPLY_TIMEOUT, self.stream.read_exact(&mut size))
-            .await
-            .expect("no reply")
-            .unwrap();
-        let n = usize::from(u16::from_be_bytes(size));
-        assert!(n >= 3, "package size {n} below the header length");
-        self.buf.clear();
-        self.buf.extend_from_slice(&size);
-        self.buf.resize(n, 0);
-        tokio::time::timeout(REPLY_TIMEOUT, self.stream.read_exact(&mut self.buf[2..]))
-            .await
-            .expect("truncated package")
-            .unwrap();
-        ControllerPackage::decode(&self.buf).unwrap()
-    }
-
-    /// The next package that is not a text message.
-    async fn recv_non_text(&mut self) -> ControllerPackage<'_> {
-        loop {
-            // Re-borrow per iteration: decode a copy of the kind first.
-            let is_text = matches!(self.recv().await, ControllerPackage::Text(_));
-            if !is_text {
-                return ControllerPackage::decode(&self.buf).unwrap();
-            }
-        }
-    }
-
-    async fn handshake(&mut self) {
-        self.send(ClientPackage::RequestProtocolVersion { version: 2 })
-            .await;
-        assert_eq!(
-            self.recv().await,
-            ControllerPackage::ProtocolVersionAccepted(true)
-        );
-    }
-
-    /// Sets up outputs; returns the recipe id and the answered types.
-    async fn setup_outputs(&mut self, frequency_hz: f64, names: &str) -> (u8, String) {
-        self.send(ClientPackage::SetupOutputs {
-            frequency_hz,
-            names,
-        })
-        .await;
-        match self.recv().await {
-            ControllerPackage::SetupOutputsReply { recipe_id, types } => {
-                (recipe_id, types.to_owned())
-            }
-            other => panic!("expected an output setup reply, got {other:?}"),
-        }
-    }
-
-    /// Sets up inputs; returns the recipe id and the answered types.
-    async fn setup_inputs(&mut self, names: &str) -> (u8, String) {
-        self.send(ClientPackage::SetupInputs { names }).await;
-        match self.recv().await {
-            ControllerPackage::SetupInputsReply { recipe_id, types } => {
-                (recipe_id, types.to_owned())
-            }
-            other => panic!("expected an input setup reply, got {other:?}"),
-        }
-    }
-}
 
 /// A trailing comma (as ur_rtde ends every list) is ignored: the output recipe is accepted
 /// with one type per real name, and so is an input recipe; an unknown name in such a list is
@@ -324,6 +225,13 @@ fn the_clock_catches_up_missed_ticks_within_the_bound_and_counts_the_rest_droppe
     assert_eq!(max_cycles_per_wake(20), 1000);
     assert_eq!(max_cycles_per_wake(100), 1000);
     assert_eq!(max_cycles_per_wake(u32::MAX), 1000);
+    // Cycle periods of 2 ms and 1 ms sleep on tokio's 1 ms timer; shorter ones (0.67 ms at
+    // speedup 3) on the clock's own thread.
+    assert!(!clock_on_own_thread(1));
+    assert!(!clock_on_own_thread(2));
+    assert!(clock_on_own_thread(3));
+    assert!(clock_on_own_thread(4));
+    assert!(clock_on_own_thread(100));
 }
 
 /// Checks the clock invariants of [`ClockStats`] on `s`.
