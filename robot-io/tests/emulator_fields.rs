@@ -2,75 +2,15 @@
 //! as well as 2, and streams several output recipes on one connection (issue 11). Raw
 //! packages over loopback; no assertion depends on wall-clock speed.
 
-use std::time::Duration;
+mod common;
 
+use common::{Raw, TEST_TIMEOUT};
 use robot_io::codec::{ClientPackage, FieldType, Value, known_field_type};
+use robot_io::emulator::EmulatorConfig;
 use robot_io::emulator::sim_fields::{AMBIENT_C, BUS_V, SIM_OUTPUT_FIELDS};
-use robot_io::emulator::{Emulator, EmulatorConfig, SimBackend};
-use robot_io::sim::{SimConfig, SimRobot};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::TcpStream;
 
-const TEST_TIMEOUT: Duration = Duration::from_secs(60);
-const REPLY_TIMEOUT: Duration = Duration::from_secs(10);
-
-async fn sim_emulator() -> Emulator {
-    let robot = SimRobot::new(SimConfig::ur5e()).unwrap();
-    Emulator::start(
-        EmulatorConfig::ephemeral(),
-        Box::new(SimBackend::new(robot)),
-    )
-    .await
-    .unwrap()
-}
-
-/// Raw packages: (type byte, payload).
-struct Raw(TcpStream);
-
-impl Raw {
-    async fn connect(emu: &Emulator) -> Raw {
-        Raw(TcpStream::connect(emu.rtde_addr()).await.unwrap())
-    }
-    async fn send_raw(&mut self, kind: u8, payload: &[u8]) {
-        let mut out = ((3 + payload.len()) as u16).to_be_bytes().to_vec();
-        out.push(kind);
-        out.extend_from_slice(payload);
-        self.0.write_all(&out).await.unwrap();
-    }
-    async fn send(&mut self, pkg: ClientPackage<'_>) {
-        let mut out = Vec::new();
-        pkg.encode(&mut out).unwrap();
-        self.0.write_all(&out).await.unwrap();
-    }
-    async fn recv(&mut self) -> (u8, Vec<u8>) {
-        let mut head = [0u8; 3];
-        tokio::time::timeout(REPLY_TIMEOUT, self.0.read_exact(&mut head))
-            .await
-            .expect("no reply")
-            .unwrap();
-        let n = usize::from(u16::from_be_bytes([head[0], head[1]]));
-        let mut payload = vec![0u8; n - 3];
-        tokio::time::timeout(REPLY_TIMEOUT, self.0.read_exact(&mut payload))
-            .await
-            .expect("truncated")
-            .unwrap();
-        (head[2], payload)
-    }
-    /// The next package of `kind`, skipping text messages.
-    async fn recv_kind(&mut self, kind: u8) -> Vec<u8> {
-        loop {
-            let (k, p) = self.recv().await;
-            if k == kind {
-                return p;
-            }
-            assert_eq!(k, b'M', "unexpected package {}", k as char);
-        }
-    }
-    async fn version(&mut self, v: u16) -> bool {
-        self.send(ClientPackage::RequestProtocolVersion { version: v })
-            .await;
-        self.recv_kind(b'V').await == [1]
-    }
+async fn sim_emulator() -> robot_io::emulator::Emulator {
+    common::sim_emulator(EmulatorConfig::ephemeral()).await
 }
 
 fn decode_all(types: &[FieldType], payload: &[u8]) -> Vec<Value> {
@@ -188,7 +128,7 @@ async fn protocol_version_1_has_no_frequency_and_no_recipe_ids() {
         assert_eq!(c.recv_kind(b'S').await, [1]);
         let mut stamps = Vec::new();
         loop {
-            let (k, p) = c.recv().await;
+            let (k, p) = c.recv_frame().await;
             if k == b'M' {
                 // Version 1 text: level, then the message.
                 assert!(p[0] <= 3 && p.len() > 1);

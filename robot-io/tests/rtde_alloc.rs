@@ -7,14 +7,15 @@
 //! and reconnect tasks run (and allocate as they please) on a tokio runtime's worker threads.
 //! Each test is bounded in time (the loops are bounded, the awaits have timeouts).
 
+mod common;
+
 use std::time::{Duration, Instant};
 
 use hrc_adapt_tests::alloc_count::{CountingAllocator, allocations_in};
 use robot_io::client::{ClientConfig, LinkState, RtdeClient};
 use robot_io::codec::Value;
-use robot_io::emulator::{Emulator, EmulatorConfig, SimBackend};
+use robot_io::emulator::{Emulator, EmulatorConfig};
 use robot_io::rtde_robot::{RtdeRobot, RtdeRobotConfig};
-use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Robot, RobotIoError, RobotState};
 
 #[global_allocator]
@@ -31,13 +32,7 @@ fn runtime() -> tokio::runtime::Runtime {
 }
 
 async fn sim_emulator() -> Emulator {
-    let robot = SimRobot::new(SimConfig::ur5e()).unwrap();
-    Emulator::start(
-        EmulatorConfig::ephemeral(),
-        Box::new(SimBackend::new(robot)),
-    )
-    .await
-    .unwrap()
+    common::sim_emulator(EmulatorConfig::ephemeral()).await
 }
 
 /// Polls `cond` every millisecond for at most `limit`.
