@@ -59,8 +59,8 @@ pub struct ExperimentArgs {
     #[arg(long, requires = "participant")]
     robot: Option<String>,
     /// Real session with `--robot emulator`: controller cycles per 2 ms of wall time
-    /// (default 4; a live camera needs 1, its default then), 1..=100: each 2 ms tick runs
-    /// that many cycles, and the trial loop already skips most samples far below 100.
+    /// (default 4; a live camera needs 1, its default then), 1..=100: one cycle every
+    /// 2 ms / N of wall time, and the trial loop already skips most samples far below 100.
     #[arg(long, requires = "participant", value_parser = crate::trial::speedup_parser())]
     speedup: Option<u32>,
     /// Real session: take each trial's cues from a live camera (`camera`: a RealSense with

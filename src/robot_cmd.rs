@@ -68,8 +68,8 @@ pub struct EmulateArgs {
     /// Real-time interface (script) port.
     #[arg(long, default_value_t = 30003)]
     realtime_port: u16,
-    /// Controller cycles per 2 ms of wall time (1 = real time), 1..=100: each 2 ms tick runs
-    /// that many cycles, so far beyond 100 the emulator cannot keep up.
+    /// Controller cycles per 2 ms of wall time (1 = real time), 1..=100: one cycle every
+    /// 2 ms / N of wall time, so far beyond 100 the emulator cannot keep up.
     #[arg(long, default_value_t = 1, value_parser = crate::trial::speedup_parser())]
     speedup: u32,
 }

@@ -229,7 +229,8 @@ async fn connect(
 }
 
 /// Starts the emulator in-process on ephemeral loopback ports with a `SimRobot` at `home_q`,
-/// running `speedup` controller cycles per 2 ms of wall time, and connects to it.
+/// running `speedup` controller cycles per 2 ms of wall time (one every 2 ms / speedup), and
+/// connects to it.
 pub(crate) fn start_emulator(
     home_q: [f64; 6],
     speedup: u32,

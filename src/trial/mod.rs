@@ -64,8 +64,8 @@ pub struct TrialArgs {
     #[arg(long, default_value = "emulator")]
     robot: String,
     /// `--robot emulator`: controller cycles the emulator runs per 2 ms of wall time
-    /// (default 4; a live camera needs 1, its default then), 1..=100: each 2 ms tick runs
-    /// that many cycles, and the trial loop already skips most samples far below 100.
+    /// (default 4; a live camera needs 1, its default then), 1..=100: one cycle every
+    /// 2 ms / N of wall time, and the trial loop already skips most samples far below 100.
     #[arg(long, value_parser = crate::trial::speedup_parser())]
     speedup: Option<u32>,
     /// Replay this recorded cue CSV (the `assess::io::cue_csv` format) instead of the simulated
