@@ -371,7 +371,8 @@ pub struct ControllerStats {
     pub otg_errors: u64,
     /// Steps that output a stop because the robot could not move or its state was unusable.
     pub stop_steps: u64,
-    /// Controller cycles that elapsed without a step (missed cycles caught up) [-].
+    /// Controller cycles that elapsed without a step (missed), whether caught up or, beyond
+    /// the envelope's catch-up bound, not [-].
     pub missed_cycles: u64,
     /// Re-synchronisations to the robot's target state (start, after a stop or an override).
     pub resyncs: u64,
@@ -792,17 +793,18 @@ impl Controller {
                 } else {
                     last + cycle
                 };
-                // At most the envelope's catch-up bound (the robot's servo extrapolation + 1,
-                // the longest the supervisor judges a step over): a longer gap delays the plan,
-                // as the robot held its target, instead of making the next target a jump.
-                let max = f64::from(self.cfg.envelope.catch_up_cycles());
-                let n = ((now - last) / cycle).round().clamp(1.0, max);
+                let n = ((now - last) / cycle).round().max(1.0);
                 (now, n)
             }
         };
+        // Every missed cycle is counted, also those beyond the catch-up bound.
+        self.stats.missed_cycles = self.stats.missed_cycles.saturating_add(elapsed as u64 - 1);
+        // The plan advances at most the envelope's catch-up bound (the robot's servo
+        // extrapolation + 1, the longest the supervisor judges a step over): a longer gap delays
+        // the plan, as the robot held its target, instead of making the next target a jump.
+        let elapsed = elapsed.min(f64::from(self.cfg.envelope.catch_up_cycles()));
         self.last_now_s = Some(now);
         self.stats.steps = self.stats.steps.saturating_add(1);
-        self.stats.missed_cycles = self.stats.missed_cycles.saturating_add(elapsed as u64 - 1);
         self.events.clear();
         self.humans.update(humans, now, &self.cfg.envelope);
 
