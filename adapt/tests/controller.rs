@@ -302,6 +302,27 @@ impl Run {
         );
     }
 
+    /// A run of `cfg` from home, 300 cycles into the handover (moving at speed), and the last
+    /// servo position sent.
+    fn moving(cfg: ControllerConfig, script: HandScript) -> (Run, Joints) {
+        let mut run = Run::new(cfg, script, Start::Home);
+        run.ctl.start_handover();
+        run.run_until(1.0, |r| r.samples.len() == 300);
+        assert!(run.state.actual_qd.iter().any(|v| v.abs() > 0.3), "moving");
+        let Some(prev) = run.prev_servo[1] else {
+            panic!("servoing")
+        };
+        (run, prev)
+    }
+
+    /// One controller step by hand at `now` [s] on a fresh state (not sent to the robot).
+    fn step_at(&mut self, now: f64) {
+        self.robot.read_state(&mut self.state).unwrap();
+        let view = self.view();
+        self.ctl
+            .step(now, &self.state, &self.adaptation, &view, &mut self.cmd);
+    }
+
     fn run_until_phase(&mut self, phase: Phase, max_s: f64) {
         self.ctl.start_handover();
         self.run_until(max_s, |r| r.ctl.phase() == phase);
@@ -858,23 +879,10 @@ fn after_a_reduction_it_continues_from_the_sent_command_not_a_step_back() {
     // (about v·lookahead); re-planning from it commanded a step back of that lag — 0.0185 rad
     // in one cycle on the emulator, which the supervisor then stopped (SAF-REQ-004). The next
     // command must continue from what was sent, within one ordinary step.
-    let mut run = Run::new(
-        ControllerConfig::example(),
-        HandScript::ReachWhenPresented,
-        Start::Home,
-    );
-    run.ctl.start_handover();
-    run.run_until(1.0, |r| r.samples.len() == 300);
-    assert!(run.state.actual_qd.iter().any(|v| v.abs() > 0.3), "moving");
-    let Some(prev) = run.prev_servo[1] else {
-        panic!("servoing")
-    };
+    let (mut run, prev) = Run::moving(ControllerConfig::example(), HandScript::ReachWhenPresented);
     // One cycle by hand: the controller's command, sent with its step halved.
-    run.robot.read_state(&mut run.state).unwrap();
-    let view = run.view();
-    let now = run.state.timestamp_s;
-    run.ctl
-        .step(now, &run.state, &run.adaptation, &view, &mut run.cmd);
+    let now = run.robot.state().timestamp_s;
+    run.step_at(now);
     let JointCommand::Servo {
         q: asked,
         lookahead_s,
@@ -938,18 +946,9 @@ fn missed_cycles_advance_the_plan_by_at_most_the_catch_up_bound() {
     let command_after = |bound: u32, gap: u32| -> (Joints, Joints) {
         let mut cfg = ControllerConfig::example();
         cfg.envelope = cfg.envelope.with_catch_up_cycles(bound).unwrap();
-        let mut run = Run::new(cfg, HandScript::Absent, Start::Home);
-        run.ctl.start_handover();
-        run.run_until(1.0, |r| r.samples.len() == 300);
-        assert!(run.state.actual_qd.iter().any(|v| v.abs() > 0.3), "moving");
-        let Some(prev) = run.prev_servo[1] else {
-            panic!("servoing")
-        };
-        run.robot.read_state(&mut run.state).unwrap();
-        let now = run.state.timestamp_s + f64::from(gap - 1) * DT;
-        let view = run.view();
-        run.ctl
-            .step(now, &run.state, &run.adaptation, &view, &mut run.cmd);
+        let (mut run, prev) = Run::moving(cfg, HandScript::Absent);
+        let now = run.robot.state().timestamp_s + f64::from(gap - 1) * DT;
+        run.step_at(now);
         let JointCommand::Servo { q, .. } = run.cmd else {
             panic!("a servo command")
         };

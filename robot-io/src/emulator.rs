@@ -1499,11 +1499,11 @@ impl Clock {
 
     /// Runs the cycles due now (see [`Clock`]).
     fn wake(&mut self) {
-        let elapsed =
-            u128::from(u64::try_from(self.start.elapsed().as_nanos()).unwrap_or(u64::MAX));
-        let due = u64::try_from(elapsed * u128::from(self.per) / u128::from(CYCLE_NS))
-            .unwrap_or(u64::MAX)
-            .max(self.done);
+        let elapsed = self.start.elapsed().as_nanos();
+        let due =
+            u64::try_from(elapsed.saturating_mul(u128::from(self.per)) / u128::from(CYCLE_NS))
+                .unwrap_or(u64::MAX)
+                .max(self.done);
         let done = self.done;
         self.done = due;
         let mut w = lock(&self.world);
