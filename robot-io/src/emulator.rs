@@ -153,6 +153,32 @@ pub struct ClockStats {
     pub max_behind_cycles: u64,
 }
 
+/// How our control program's servo commands reached it and what it did with them, counted
+/// every cycle by [`SimBackend`] ([`Emulator::servo_stats`]). It tells, for a client such as
+/// the trial's control loop, how much of its motion the program had to extrapolate or hold:
+/// a command arriving late is extrapolated from the tick it was meant for, and beyond the
+/// program's bound (`extrapolate_max_s`) the target holds and the arm brakes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ServoStats {
+    /// Servo commands received (new sequence numbers) [-].
+    pub commands: u64,
+    /// `late[k]`: commands that arrived `k` program cycles after the tick they were meant for
+    /// (`late[0]`: on time or early; the last entry: [`SERVO_LATE_BINS`] − 1 cycles or more)
+    /// [-].
+    pub late: [u64; SERVO_LATE_BINS],
+    /// Cycles in which the program extrapolated the target in force within its bound
+    /// (its tick past the target's valid tick) [cycles].
+    pub extrapolated_cycles: u64,
+    /// Cycles in which the target in force was older than the bound, so the program held it
+    /// (the arm then brakes towards it) [cycles].
+    pub held_cycles: u64,
+    /// Separate holds: runs of consecutive held cycles [-].
+    pub holds: u64,
+}
+
+/// Bins of [`ServoStats::late`] [-].
+pub const SERVO_LATE_BINS: usize = 17;
+
 impl Default for EmulatorConfig {
     fn default() -> Self {
         Self {
@@ -260,6 +286,11 @@ pub trait EmulatorBackend: Send + std::fmt::Debug + 'static {
     }
     /// A client's input recipe set the speed slider to `fraction` [-] (default: ignored).
     fn speed_slider(&mut self, _fraction: f64) {}
+    /// What happened to our control program's servo commands, for a backend that runs it
+    /// ([`SimBackend`]; default: `None`).
+    fn servo_stats(&self) -> Option<ServoStats> {
+        None
+    }
     /// For tests and tools that need the concrete backend.
     fn as_any_mut(&mut self) -> &mut dyn Any;
 }
@@ -304,6 +335,10 @@ pub struct SimBackend {
     io: IoEcho,
     /// A `.urp` loaded through the dashboard (played as a program that holds the arm).
     urp: Option<String>,
+    /// What happened to the servo commands ([`ServoStats`]).
+    servo_stats: ServoStats,
+    /// The last cycle held the target (for [`ServoStats::holds`]).
+    holding: bool,
     /// Last speed slider fraction applied [-].
     slider: Option<f64>,
 }
@@ -344,6 +379,8 @@ impl SimBackend {
             io: IoEcho::default(),
             urp: None,
             slider: None,
+            servo_stats: ServoStats::default(),
+            holding: false,
         }
     }
 
@@ -414,6 +451,7 @@ impl SimBackend {
         }
         self.last_seq = seq;
         self.servo = None;
+        self.holding = false;
         let Some(decoded) = RegisterMap::decode(&ints, &doubles) else {
             return;
         };
@@ -424,6 +462,18 @@ impl SimBackend {
                 lookahead_s,
                 gain,
             } => {
+                let st = &mut self.servo_stats;
+                st.commands = st.commands.saturating_add(1);
+                let late = self
+                    .tick
+                    .wrapping_sub(decoded.feedforward.valid_tick)
+                    .max(0);
+                let bin = usize::try_from(late)
+                    .unwrap_or(usize::MAX)
+                    .min(SERVO_LATE_BINS - 1);
+                if let Some(n) = st.late.get_mut(bin) {
+                    *n = n.saturating_add(1);
+                }
                 self.servo = Some(ServoInForce {
                     q,
                     lookahead_s,
@@ -444,8 +494,24 @@ impl SimBackend {
     /// Sends the servo command in force with its extrapolated target, unless that is the
     /// target sent last (a held target is latched already).
     fn send_servo_target(&mut self, extrapolate_max_s: f64) {
-        let Some(servo) = &mut self.servo else { return };
+        let Some(servo) = &mut self.servo else {
+            self.holding = false;
+            return;
+        };
         let since_s = servo.feedforward.since_valid_s(self.tick, CYCLE_S);
+        let st = &mut self.servo_stats;
+        // A small tolerance: since_s is a whole number of cycles × 2 ms.
+        let moving = servo.feedforward.clamped().qd.iter().any(|v| *v != 0.0);
+        let held = moving && since_s > extrapolate_max_s + 1e-9;
+        if held {
+            st.held_cycles = st.held_cycles.saturating_add(1);
+            if !self.holding {
+                st.holds = st.holds.saturating_add(1);
+            }
+        } else if since_s > 0.0 {
+            st.extrapolated_cycles = st.extrapolated_cycles.saturating_add(1);
+        }
+        self.holding = held;
         let target = servo
             .feedforward
             .target(&servo.q, since_s, extrapolate_max_s);
@@ -465,6 +531,10 @@ impl SimBackend {
 }
 
 impl EmulatorBackend for SimBackend {
+    fn servo_stats(&self) -> Option<ServoStats> {
+        Some(self.servo_stats)
+    }
+
     fn describe(&self) -> String {
         "simulated ur5e (SimRobot), register protocol".into()
     }
@@ -1344,6 +1414,12 @@ impl Emulator {
     /// dropped (beyond the per-wake bound) and skipped while paused, all read at once.
     pub fn clock_stats(&self) -> ClockStats {
         lock(&self.world).clock
+    }
+
+    /// What happened to our control program's servo commands so far ([`ServoStats`]); `None`
+    /// when the backend does not run the program (trace replay).
+    pub fn servo_stats(&self) -> Option<ServoStats> {
+        lock(&self.world).backend.servo_stats()
     }
 
     /// Scripts received on the script ports so far.

@@ -499,3 +499,64 @@ fn without_feedforward_targets_are_held_as_written() {
         assert_eq!(b.backend.robot_mut().command(), Some(&speed));
     }
 }
+
+/// The emulator counts what happened to the servo commands (`ServoStats`, what
+/// `Emulator::servo_stats` reports after a trial): how late each arrived, and the cycles the
+/// program extrapolated a target within its bound or held it beyond.
+#[test]
+fn servo_stats_count_late_commands_and_extrapolated_and_held_cycles() {
+    let (mut b, q) = bench_at_rest();
+    let stats = |b: &Bench| b.backend.servo_stats().expect("the sim backend counts");
+    assert_eq!(stats(&b), robot_io::emulator::ServoStats::default());
+    let moving = ServoFeedforward {
+        qd: [0.5, 0.0, 0.0, 0.0, 0.0, 0.0],
+        qdd: [0.0; 6],
+        valid_tick: b.valid_tick(0),
+    };
+    b.write(&servo(q), &moving);
+    for _ in 0..10 {
+        b.step();
+    }
+    // Worked by hand, bound 6 ms = 3 cycles: the first cycle runs the command on time
+    // (δ = 0), the next three extrapolate it (δ = 2, 4, 6 ms), the last six hold it.
+    let s = stats(&b);
+    assert_eq!(s.commands, 1);
+    assert_eq!(s.late[0], 1);
+    assert_eq!(s.extrapolated_cycles, 3);
+    assert_eq!((s.held_cycles, s.holds), (6, 1));
+    // A command meant for 2 ticks ago: 2 cycles late, extrapolated from its arrival on
+    // (δ = 4, 6 ms), then held again (a second hold).
+    let valid_tick = b.valid_tick(2);
+    b.write(
+        &servo(q),
+        &ServoFeedforward {
+            valid_tick,
+            ..moving
+        },
+    );
+    for _ in 0..4 {
+        b.step();
+    }
+    let s = stats(&b);
+    assert_eq!((s.commands, s.late[0], s.late[2]), (2, 1, 1));
+    assert_eq!(s.extrapolated_cycles, 3 + 2);
+    assert_eq!((s.held_cycles, s.holds), (6 + 2, 2));
+    // A command at rest (no feedforward) that goes stale holds nothing that moves: not
+    // counted as held; one more than 16 cycles late lands in the last bin.
+    let valid_tick = b.valid_tick(40);
+    b.write(
+        &servo(q),
+        &ServoFeedforward {
+            valid_tick,
+            ..ServoFeedforward::ZERO
+        },
+    );
+    for _ in 0..5 {
+        b.step();
+    }
+    let s = stats(&b);
+    assert_eq!(s.commands, 3);
+    assert_eq!(s.late[robot_io::emulator::SERVO_LATE_BINS - 1], 1);
+    assert_eq!((s.held_cycles, s.holds), (8, 2));
+    assert_eq!(s.late.iter().sum::<u64>(), s.commands);
+}

@@ -71,6 +71,8 @@ pub(crate) struct PacedRtde {
     robot: RtdeRobot,
     rt: tokio::runtime::Handle,
     last_ts: f64,
+    /// The in-process emulator behind it, for its servo statistics (`None`: a real robot).
+    emulator: Option<Arc<Emulator>>,
 }
 
 impl std::fmt::Debug for PacedRtde {
@@ -82,11 +84,16 @@ impl std::fmt::Debug for PacedRtde {
 }
 
 impl PacedRtde {
-    fn new(robot: RtdeRobot, rt: &tokio::runtime::Runtime) -> Self {
+    fn new(
+        robot: RtdeRobot,
+        rt: &tokio::runtime::Runtime,
+        emulator: Option<Arc<Emulator>>,
+    ) -> Self {
         Self {
             robot,
             rt: rt.handle().clone(),
             last_ts: f64::NEG_INFINITY,
+            emulator,
         }
     }
 }
@@ -144,6 +151,9 @@ impl TrialRobot for PacedRtde {
     }
     fn servo_extrapolation_s(&self) -> Option<f64> {
         Some(self.robot.registers().extrapolate_max_s)
+    }
+    fn servo_stats(&self) -> Option<robot_io::emulator::ServoStats> {
+        self.emulator.as_ref().and_then(|e| e.servo_stats())
     }
 }
 
@@ -270,11 +280,12 @@ pub(crate) fn start_emulator(
         .await?;
         Ok::<_, Error>((emu, robot))
     })?;
-    let robot = PacedRtde::new(robot, &rt);
+    let emulator = Arc::new(emulator);
+    let robot = PacedRtde::new(robot, &rt, Some(Arc::clone(&emulator)));
     Ok((
         robot,
         RtdeGuard {
-            emulator: Some(Arc::new(emulator)),
+            emulator: Some(emulator),
             rt,
         },
     ))
@@ -342,6 +353,6 @@ pub(crate) fn connect_ur(
         ports.script,
         RegisterMap::default(),
     ))?;
-    let robot = PacedRtde::new(robot, &rt);
+    let robot = PacedRtde::new(robot, &rt, None);
     Ok((robot, RtdeGuard { emulator: None, rt }))
 }

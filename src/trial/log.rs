@@ -775,6 +775,12 @@ impl TrialLog {
         self.drain()
     }
 
+    /// The robot side's servo statistics at the end of the trial (the in-process emulator's):
+    /// `summary.json`'s `motion.robot_servo`.
+    pub(crate) fn set_robot_servo(&mut self, stats: robot_io::emulator::ServoStats) {
+        self.motion.set_robot_servo(stats);
+    }
+
     /// Drains the ring, closes every file, writes `summary.json` and the report.
     pub(crate) fn finish(mut self) -> crate::Result<TrialFiles> {
         self.drain()?;

@@ -66,6 +66,7 @@
 use std::collections::{BTreeMap, VecDeque};
 
 use robot_io::RobotState;
+use robot_io::emulator::{SERVO_LATE_BINS, ServoStats};
 use safety::{Requirement, Verdict, Violation};
 use serde::Serialize;
 
@@ -443,6 +444,9 @@ pub(crate) struct MotionMetrics {
     time_scale_sum: f64,
     time_scale_n: u64,
     time_scale_min: f64,
+    /// The robot side's own count of what it did with the servo commands (the in-process
+    /// emulator only).
+    robot_servo: Option<ServoStats>,
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -463,6 +467,12 @@ const ALL: usize = 0;
 const OUTSIDE: usize = 1;
 
 impl MotionMetrics {
+    /// The robot side's servo statistics, as the in-process emulator counted them at the end
+    /// of the trial (`motion.robot_servo`).
+    pub(crate) fn set_robot_servo(&mut self, stats: ServoStats) {
+        self.robot_servo = Some(stats);
+    }
+
     /// Empty metrics with every buffer preallocated.
     pub(crate) fn new() -> Self {
         Self {
@@ -494,6 +504,7 @@ impl MotionMetrics {
             time_scale_sum: 0.0,
             time_scale_n: 0,
             time_scale_min: f64::INFINITY,
+            robot_servo: None,
         }
     }
 
@@ -870,8 +881,35 @@ impl MotionMetrics {
                 time_scale_mean: (self.time_scale_n > 0)
                     .then(|| r6(self.time_scale_sum / self.time_scale_n as f64)),
             },
+            robot_servo: self.robot_servo.map(|s| RobotServoSummary {
+                commands: s.commands,
+                late_by_cycles: s.late,
+                extrapolated_cycles: s.extrapolated_cycles,
+                held_cycles: s.held_cycles,
+                holds: s.holds,
+            }),
         }
     }
+}
+
+/// `motion.robot_servo`: what the robot side did with the servo commands, as the in-process
+/// emulator counts it every controller cycle (`robot_io::emulator::ServoStats`). Only for
+/// `--robot emulator` (absent on `--robot sim`, which has no RTDE link, and on a real UR5e,
+/// which does not tell).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) struct RobotServoSummary {
+    /// Servo commands the program received.
+    pub(crate) commands: u64,
+    /// Index k: commands that arrived k program cycles after the tick they were meant for
+    /// (0: on time; the last index: 16 or more).
+    pub(crate) late_by_cycles: [u64; SERVO_LATE_BINS],
+    /// Cycles in which the program extrapolated the target in force within its bound.
+    pub(crate) extrapolated_cycles: u64,
+    /// Cycles in which the moving target in force was older than the bound and held (the arm
+    /// brakes towards it).
+    pub(crate) held_cycles: u64,
+    /// Separate runs of held cycles.
+    pub(crate) holds: u64,
 }
 
 /// `motion` in `summary.json` (README.md, "Motion quality metrics").
@@ -897,6 +935,9 @@ pub(crate) struct MotionSummary {
     pub(crate) stop_and_go: StopAndGoSummary,
     /// What the cycles reported about themselves.
     pub(crate) cycles: CycleSummary,
+    /// What the robot side did with the servo commands (emulator runs only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub(crate) robot_servo: Option<RobotServoSummary>,
 }
 
 /// Counts of one requirement.
@@ -1456,6 +1497,35 @@ mod tests {
     /// [47.32, 50.12) µs, reported as its upper edge 10^1.7 = 50.118723 µs; p99 (rank 99: 99
     /// µs) is in [94.41, 100) µs, whose edge 100 µs is also the maximum. No jitter values (mock
     /// clock): `null`.
+    #[test]
+    fn robot_servo_statistics_are_passed_through_and_absent_without_an_emulator() {
+        let mut m = MotionMetrics::new();
+        let json = serde_json::to_value(summary(&mut m)).unwrap();
+        assert!(json.get("robot_servo").is_none(), "{json}");
+        let mut late = [0; SERVO_LATE_BINS];
+        late[0] = 90;
+        late[3] = 7;
+        late[SERVO_LATE_BINS - 1] = 3;
+        let mut m = MotionMetrics::new();
+        m.set_robot_servo(ServoStats {
+            commands: 100,
+            late,
+            extrapolated_cycles: 40,
+            held_cycles: 12,
+            holds: 2,
+        });
+        let json = serde_json::to_value(summary(&mut m)).unwrap();
+        let r = &json["robot_servo"];
+        assert_eq!(r["commands"], 100);
+        assert_eq!(r["late_by_cycles"][0], 90);
+        assert_eq!(r["late_by_cycles"][3], 7);
+        assert_eq!(r["late_by_cycles"][SERVO_LATE_BINS - 1], 3);
+        assert_eq!(
+            (&r["extrapolated_cycles"], &r["held_cycles"], &r["holds"]),
+            (&40.into(), &12.into(), &2.into())
+        );
+    }
+
     #[test]
     fn missed_cycles_and_latency_percentiles_from_a_known_sequence() {
         let mut m = MotionMetrics::new();

@@ -343,6 +343,11 @@ pub(crate) trait TrialRobot: Robot + Send {
     fn servo_extrapolation_s(&self) -> Option<f64> {
         None
     }
+    /// What the robot side did with the servo commands (the in-process emulator counts it;
+    /// `None` for other robots): written into `summary.json`'s `motion.robot_servo`.
+    fn servo_stats(&self) -> Option<robot_io::emulator::ServoStats> {
+        None
+    }
 }
 
 impl TrialRobot for LockstepSim {}
@@ -763,6 +768,9 @@ fn drive<R: TrialRobot>(
         failure = Some(e.context("the live camera failed"));
     }
     // 3. Every log, with the reason.
+    if let Some(st) = cc.supervisor.robot().servo_stats() {
+        log.set_robot_servo(st);
+    }
     let event = log.event(t_end, &TrialEvent::Finished { reason });
     let finished = log.finish();
     let dir = match event.and(finished) {
@@ -1837,6 +1845,25 @@ mod tests {
         assert_trial_files(&out);
         let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
         assert!(summary.contains("\"robot\": \"emulator\""), "{summary}");
+        // The emulator's own count of the servo commands: every command in one lateness bin,
+        // and about one command per control cycle (the loop sends one per cycle it runs).
+        let json: serde_json::Value = serde_json::from_str(&summary).unwrap();
+        let servo = &json["motion"]["robot_servo"];
+        let commands = servo["commands"]
+            .as_u64()
+            .expect("motion.robot_servo.commands");
+        let late: u64 = servo["late_by_cycles"]
+            .as_array()
+            .expect("late_by_cycles")
+            .iter()
+            .map(|n| n.as_u64().unwrap())
+            .sum();
+        assert_eq!(late, commands, "{servo}");
+        let cycles = json["motion"]["control_cycles"].as_u64().unwrap();
+        assert!(
+            commands > cycles / 2 && commands <= cycles,
+            "{commands} of {cycles}"
+        );
         // Paced on the controller clock: about 6 s of trial time were assessed at 30 Hz.
         let rows = std::fs::read_to_string(out.join("indicators.csv"))
             .unwrap()
@@ -1933,6 +1960,9 @@ mod tests {
             assert!(x.len() > 100, "{f} is too short");
             assert!(x == y, "{f} differs between two runs of the same seed");
         }
+        // No RTDE link on the mock clock: no robot-side servo statistics (emulator only).
+        let summary = std::fs::read_to_string(da.join("summary.json")).unwrap();
+        assert!(!summary.contains("robot_servo"), "{summary}");
         let other = tempfile::tempdir().unwrap();
         let dc = run_simulated(&spec(43, 45.0), other.path(), false).unwrap();
         assert_ne!(
