@@ -1252,6 +1252,20 @@ fn motion_section(h: &mut String, s: &Summary) {
     ] {
         let _ = writeln!(h, "<tr><th>{}</th><td>{}</td></tr>", esc(k), esc(&v));
     }
+    if let Some(r) = &m.robot_servo {
+        let late: u64 = r.late_by_cycles.iter().skip(1).sum();
+        let v = format!(
+            "{} commands, {} of them late (≥ 1 cycle); {} cycles extrapolated, {} held in {} \
+             holds (a moving target older than the robot's extrapolation bound: the arm brakes)",
+            r.commands, late, r.extrapolated_cycles, r.held_cycles, r.holds
+        );
+        let _ = writeln!(
+            h,
+            "<tr><th>{}</th><td>{}</td></tr>",
+            esc("robot side (emulator): servo commands"),
+            esc(&v)
+        );
+    }
     h.push_str("</table>\n");
 
     let i = &m.interventions;

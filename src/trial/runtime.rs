@@ -1864,6 +1864,8 @@ mod tests {
             commands > cycles / 2 && commands <= cycles,
             "{commands} of {cycles}"
         );
+        let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+        assert!(report.contains("robot side (emulator): servo commands"));
         // Paced on the controller clock: about 6 s of trial time were assessed at 30 Hz.
         let rows = std::fs::read_to_string(out.join("indicators.csv"))
             .unwrap()
@@ -1963,6 +1965,8 @@ mod tests {
         // No RTDE link on the mock clock: no robot-side servo statistics (emulator only).
         let summary = std::fs::read_to_string(da.join("summary.json")).unwrap();
         assert!(!summary.contains("robot_servo"), "{summary}");
+        let report = std::fs::read_to_string(da.join("report.html")).unwrap();
+        assert!(!report.contains("robot side (emulator)"));
         let other = tempfile::tempdir().unwrap();
         let dc = run_simulated(&spec(43, 45.0), other.path(), false).unwrap();
         assert_ne!(
