@@ -169,8 +169,12 @@ pub struct ServoStats {
     /// Cycles in which the program extrapolated the target in force within its bound
     /// (its tick past the target's valid tick) [cycles].
     pub extrapolated_cycles: u64,
-    /// Cycles in which the target in force was older than the bound, so the program held it
-    /// (the arm then brakes towards it) [cycles].
+    /// Cycles in which the target in force was meant for a later tick (it came early: the
+    /// client predicted ahead while a sample was late), so the program evaluated it back to
+    /// its tick [cycles].
+    pub early_cycles: u64,
+    /// Cycles in which a moving target (non-zero feedforward velocity) in force was older than
+    /// the bound, so the program held it (the arm then brakes towards it) [cycles].
     pub held_cycles: u64,
     /// Separate holds: runs of consecutive held cycles [-].
     pub holds: u64,
@@ -500,8 +504,8 @@ impl SimBackend {
         };
         let since_s = servo.feedforward.since_valid_s(self.tick, CYCLE_S);
         let st = &mut self.servo_stats;
-        // A small tolerance: since_s is a whole number of cycles × 2 ms.
         let moving = servo.feedforward.clamped().qd.iter().any(|v| *v != 0.0);
+        // A small tolerance: since_s is a whole number of cycles × 2 ms.
         let held = moving && since_s > extrapolate_max_s + 1e-9;
         if held {
             st.held_cycles = st.held_cycles.saturating_add(1);
@@ -510,6 +514,8 @@ impl SimBackend {
             }
         } else if since_s > 0.0 {
             st.extrapolated_cycles = st.extrapolated_cycles.saturating_add(1);
+        } else if since_s < 0.0 {
+            st.early_cycles = st.early_cycles.saturating_add(1);
         }
         self.holding = held;
         let target = servo

@@ -19,7 +19,7 @@
 //! [`crate::rtde_robot::servo_slot`]). On every cycle the program servos to
 //!
 //! ```text
-//! target_j = q_j + qd_j·e_j + ½·qdd_j·e_j²,   δ = clamp((tick − valid_tick)·t, 0, extrapolate_max_s)
+//! target_j = q_j + qd_j·e_j + ½·qdd_j·e_j²,   δ = clamp((tick − valid_tick)·t, −extrapolate_max_s, extrapolate_max_s)
 //! ```
 //!
 //! so a target that reaches the program late, or that it keeps for several cycles, is
@@ -31,7 +31,16 @@
 //! `qd_j` and `qdd_j` are clamped to ±[`FEEDFORWARD_MAX_QD_RAD_S`] and
 //! ±[`FEEDFORWARD_MAX_QDD_RAD_S2`], and `e_j = δ` except that a joint's target never turns
 //! back: when `qd_j·qdd_j < 0`, `e_j = min(δ, −qd_j/qdd_j)` (the target stops where its
-//! extrapolated velocity reaches zero), and a joint with `qd_j = 0` holds `q_j`. Beyond
+//! extrapolated velocity reaches zero), and a joint with `qd_j = 0` holds `q_j`.
+//!
+//! A target that arrives **before** the tick it is meant for (δ < 0: the client predicted a
+//! cycle ahead while a state sample was late, and the sample then came) is evaluated back along
+//! its feedforward to the program's tick, by at most `extrapolate_max_s`, with the same rule
+//! in reverse (when `qd_j·qdd_j > 0`, `e_j = max(δ, −qd_j/qdd_j)`). Until issue 10's session 7
+//! δ was clamped at 0: such a target was applied a cycle early, and each time the client's
+//! lead began or ended the target stepped by a cycle (at speedup 1 most of the executed-jerk
+//! samples over the limit; `commands_stamped_ahead_are_as_smooth_as_commands_on_time` in
+//! `tests/servo_feedforward.rs`: 84 rad/s³ of jerk difference before, 0.15 after). Beyond
 //! `extrapolate_max_s` the target holds at δ = `extrapolate_max_s`; when writes stop
 //! altogether the watchdog stops the program as before. [`ServoFeedforward::target`] is this
 //! formula; the emulator runs it every cycle, the URScript program runs the same arithmetic.
@@ -53,7 +62,9 @@
 //! `2·a_stop·δmax` (0.038 rad/s at a_stop = π rad/s² and δmax = 6 ms). Below that speed the
 //! extrapolated target can pass the checked rest point by at most
 //! 0.038·0.006 + ½·π·0.006² ≈ 3·10⁻⁴ rad per joint. The extrapolated target never turns back
-//! and never passes the point where its own velocity reaches zero.
+//! and never passes the point where its own velocity reaches zero. A target evaluated back
+//! (δ < 0) lies behind the target sent, along that target's own trajectory, by at most the
+//! same distance: towards where the arm comes from, never beyond a checked command.
 //!
 //! # Register layout
 //! With the defaults `int_base = double_base = 24` (offsets from the base in brackets):
@@ -171,7 +182,8 @@ impl ServoFeedforward {
 
     /// The time by which the program extrapolates at tick `tick`, with servoj time
     /// `servo_time_s` [s]: `(tick − valid_tick)·t` [s] (wrapping difference; negative when
-    /// the target is meant for a later tick, which [`ServoFeedforward::target`] holds at 0).
+    /// the target is meant for a later tick, which [`ServoFeedforward::target`] evaluates back
+    /// to the tick).
     pub fn since_valid_s(&self, tick: i32, servo_time_s: f64) -> f64 {
         f64::from(tick.wrapping_sub(self.valid_tick)) * servo_time_s
     }
@@ -188,7 +200,7 @@ impl ServoFeedforward {
         };
         let d = since_s;
         let d = if d.is_finite() {
-            d.clamp(0.0, max_s)
+            d.clamp(-max_s, max_s)
         } else {
             0.0
         };
@@ -196,8 +208,12 @@ impl ServoFeedforward {
         for ((o, v), a) in out.iter_mut().zip(ff.qd).zip(ff.qdd) {
             let e = if v == 0.0 {
                 0.0
-            } else if v * a < 0.0 {
+            } else if d >= 0.0 && v * a < 0.0 {
+                // Forward: stop where the velocity reaches 0 (never turn back).
                 d.min(-v / a)
+            } else if d < 0.0 && v * a > 0.0 {
+                // Back in time: stop where the velocity, going back, reaches 0.
+                d.max(-v / a)
             } else {
                 d
             };
@@ -682,7 +698,8 @@ mod tests {
         assert!(p.contains(r#"rtde_set_watchdog("input_int_register_30", 25, "stop")"#));
         assert!(p.contains("read_input_float_register(34)")); // 25 + 9: acceleration
         assert!(p.contains("write_output_integer_register(30, tick)"));
-        assert!(p.contains("clamp((tick - read_input_integer_register(32)) * t, 0.0, 0.02)"));
+        assert!(p.contains("clamp((tick - read_input_integer_register(32)) * t, -0.02, 0.02)"));
+        assert!(p.contains("e = clamp(d, -vc / ac, 0.0)"));
         assert!(p.contains("vc = clamp(v, -3.141592653589793, 3.141592653589793)"));
         assert!(p.contains("ac = clamp(a, -3.141592653589793, 3.141592653589793)"));
         assert!(p.contains(
@@ -699,13 +716,13 @@ mod tests {
         // The default renders the 6 ms bound with a decimal point.
         let d = RegisterMap::default().program();
         assert!(d.contains("extrapolate_max_s=0.006"), "{d}");
-        assert!(d.contains(") * t, 0.0, 0.006)"));
+        assert!(d.contains(") * t, -0.006, 0.006)"));
         assert_eq!(RegisterMap::from_program(&d), Some(RegisterMap::default()));
         let zero = RegisterMap {
             extrapolate_max_s: 0.0,
             ..RegisterMap::default()
         };
-        assert!(zero.program().contains(") * t, 0.0, 0.0)"));
+        assert!(zero.program().contains(") * t, -0.0, 0.0)"));
     }
 
     #[test]
@@ -871,10 +888,13 @@ mod tests {
         let ff = one_joint(0.5, 0.0);
         assert!((ff.since_valid_s(103, 0.002) - 0.006).abs() < 1e-15);
         assert_eq!(ff.since_valid_s(100, 0.002), 0.0);
-        // Early (meant for a later tick): negative, and `target` holds it at δ = 0.
+        // Early (meant for a later tick): negative, and `target` evaluates it back to the
+        // tick: 0.5 rad/s · (−0.004 s) = −0.002 rad.
         assert!((ff.since_valid_s(98, 0.002) + 0.004).abs() < 1e-15);
         let q = [1.0; 6];
-        assert_eq!(ff.target(&q, ff.since_valid_s(98, 0.002), 0.006), q);
+        let back = ff.target(&q, ff.since_valid_s(98, 0.002), 0.006);
+        assert!((back[0] - 0.998).abs() < 1e-15, "{back:?}");
+        assert_eq!(back[1..], q[1..]);
         // Across the i32 wrap: valid at i32::MAX, now i32::MIN + 1 is 2 ticks later.
         let wrap = ServoFeedforward {
             valid_tick: i32::MAX,
@@ -942,12 +962,17 @@ mod tests {
             let t = ff.target(&q, since, max);
             let t2 = ff.target(&q, since + later, max);
             let held = ff.target(&q, max + 1.0, max);
+            let first = ff.target(&q, -max - 1.0, max);
             for j in 0..6 {
                 let bound = c.qd[j].abs() * max + 0.5 * c.qdd[j].abs() * max * max;
-                prop_assert!((t[j] - q[j]).abs() <= bound + 1e-12);
-                prop_assert!((t[j] - q[j]) * c.qd[j] >= 0.0);
-                prop_assert!((t2[j] - q[j]).abs() >= (t[j] - q[j]).abs() - 1e-15);
-                prop_assert!((t2[j] - q[j]).abs() <= (held[j] - q[j]).abs() + 1e-15);
+                let (o, o2) = (t[j] - q[j], t2[j] - q[j]);
+                prop_assert!(o.abs() <= bound + 1e-12);
+                // Ahead of q along qd after the valid time, behind it before.
+                prop_assert!(o * c.qd[j] * since.signum() >= 0.0);
+                // Later is never further back along qd: the target moves one way only.
+                prop_assert!((o2 - o) * c.qd[j] >= -1e-15);
+                prop_assert!((o2 - (held[j] - q[j])) * c.qd[j] <= 1e-15);
+                prop_assert!((o - (first[j] - q[j])) * c.qd[j] >= -1e-15);
                 if since >= max {
                     prop_assert_eq!(t[j], held[j]);
                 }

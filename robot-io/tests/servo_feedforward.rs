@@ -559,4 +559,113 @@ fn servo_stats_count_late_commands_and_extrapolated_and_held_cycles() {
     assert_eq!(s.late[robot_io::emulator::SERVO_LATE_BINS - 1], 1);
     assert_eq!((s.held_cycles, s.holds), (8, 2));
     assert_eq!(s.late.iter().sum::<u64>(), s.commands);
+    assert_eq!(s.early_cycles, 0);
+    // A command meant for 2 ticks ahead: evaluated back on the first cycle (δ = −2 ms), on
+    // time on the second; it counts as on time on arrival.
+    let valid_tick = b.valid_tick(-1);
+    b.write(
+        &servo(q),
+        &ServoFeedforward {
+            valid_tick,
+            ..moving
+        },
+    );
+    b.step();
+    b.step();
+    let s = stats(&b);
+    assert_eq!((s.commands, s.late[0], s.early_cycles), (4, 2, 1));
+}
+
+/// A command that reaches the program before the tick it is meant for (the client predicted a
+/// cycle ahead while a state sample was late, `RtdeRobot::send`'s `servo_slot`) is evaluated
+/// back along its feedforward to the program's tick, not applied early: worked by hand with
+/// qd = 0.5 rad/s, qdd = 2 rad/s², one cycle early: δ = −2 ms gives
+/// (0.5 + ½·2·(−0.002))·(−0.002) = −0.000996 rad, then δ = 0 and +2 ms: 0 and 0.001004 rad.
+/// Going back, a joint stops where its velocity reaches 0 (e ≥ −qd/qdd when they have the same
+/// sign): qd = 0.01 rad/s, qdd = 3 rad/s², three cycles early (δ = −6 ms) stops at
+/// e = −1/300 s: (0.01 − 1.5/300)·(−1/300) = −1/60000 rad.
+#[test]
+fn an_early_command_is_evaluated_back_to_the_programs_tick() {
+    let (mut b, q) = bench_at_rest();
+    let valid_tick = b.valid_tick(-1);
+    b.write(
+        &servo(q),
+        &ServoFeedforward {
+            qd: [0.5, 0.01, 0.0, 0.0, 0.0, 0.0],
+            qdd: [2.0, 3.0, 0.0, 0.0, 0.0, 0.0],
+            valid_tick,
+        },
+    );
+    for (k, want) in [-0.000996, 0.0, 0.001004].into_iter().enumerate() {
+        b.step();
+        let got = b.latched_target()[0] - q[0];
+        assert!((got - want).abs() < 1e-12, "cycle {k}: {got}");
+    }
+    let valid_tick = b.valid_tick(-3);
+    b.write(
+        &servo(q),
+        &ServoFeedforward {
+            qd: [0.0, 0.01, 0.0, 0.0, 0.0, 0.0],
+            qdd: [0.0, 3.0, 0.0, 0.0, 0.0, 0.0],
+            valid_tick,
+        },
+    );
+    b.step();
+    let got = b.latched_target()[1] - q[1];
+    assert!((got + 1.0 / 60000.0).abs() < 1e-12, "{got}");
+}
+
+/// Commands stamped a cycle ahead for stretches of a run (as the trial's loop stamps them while
+/// it runs ahead of late samples), then on time again: executed as smoothly as every-cycle
+/// commands on time, within the bound of
+/// `commands_delayed_in_transit_are_extrapolated_by_the_delay_on_the_programs_clock` (69.4
+/// rad/s³; a target evaluated one cycle back along the parabola errs like one extrapolated a
+/// cycle forward). Applied early instead (the program before issue 10's session 7), each
+/// change of lead was a one-cycle target step.
+#[test]
+fn commands_stamped_ahead_are_as_smooth_as_commands_on_time() {
+    const BOUND_RAD_S3: f64 = 69.4;
+    let every_cycle = run(1, true);
+    let ahead = run_stamped_ahead(25);
+    let d = max_jerk_difference(&ahead.states, &every_cycle.states);
+    eprintln!("jerk difference to on-time commands: {d:.2} rad/s³");
+    assert_eq!(reversals(&ahead.states), 0);
+    assert!(d <= BOUND_RAD_S3, "jerk differs by {d} rad/s³");
+}
+
+/// Every cycle a command, computed and stamped for the tick after next (one cycle ahead) in
+/// every other stretch of `stretch` commands, for the next tick otherwise.
+fn run_stamped_ahead(stretch: u64) -> Run {
+    let mut b = Bench::new(RegisterMap {
+        extrapolate_max_s: 0.024,
+        ..RegisterMap::default()
+    });
+    let mut est = FeedforwardEstimator::new(b.map.feedforward_max_gap_s());
+    let start = b.state();
+    let (q0, t0) = (start.actual_q, start.timestamp_s);
+    let mut run = Run {
+        q0,
+        states: Vec::new(),
+        targets: Vec::new(),
+    };
+    let cycles = ((PERIOD_S + 0.5) / CYCLE_S) as u64;
+    let mut last_valid = i32::MIN;
+    for k in 0..cycles {
+        let s = b.state();
+        let lead = i32::from((k / stretch) % 2 == 1);
+        // Never stamp two commands for one tick (servo_slot): on leaving a stretch ahead, the
+        // next command is for the tick after the last one.
+        let valid_tick = (b.valid_tick(0) + lead).max(last_valid + 1);
+        last_valid = valid_tick;
+        let ahead = f64::from(valid_tick - b.valid_tick(0));
+        let valid_at = s.timestamp_s + CYCLE_S * (1.0 + ahead);
+        let q = trajectory(&q0, valid_at - t0);
+        let mut ff = est.push(valid_at, &q);
+        ff.valid_tick = valid_tick;
+        b.write(&servo(q), &ff);
+        let state = b.step();
+        run.states.push(state);
+        run.targets.push(b.latched_target());
+    }
+    run
 }

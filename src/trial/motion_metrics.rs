@@ -885,6 +885,7 @@ impl MotionMetrics {
                 commands: s.commands,
                 late_by_cycles: s.late,
                 extrapolated_cycles: s.extrapolated_cycles,
+                early_cycles: s.early_cycles,
                 held_cycles: s.held_cycles,
                 holds: s.holds,
             }),
@@ -905,6 +906,8 @@ pub(crate) struct RobotServoSummary {
     pub(crate) late_by_cycles: [u64; SERVO_LATE_BINS],
     /// Cycles in which the program extrapolated the target in force within its bound.
     pub(crate) extrapolated_cycles: u64,
+    /// Cycles in which the target in force was meant for a later tick (evaluated back).
+    pub(crate) early_cycles: u64,
     /// Cycles in which the moving target in force was older than the bound and held (the arm
     /// brakes towards it).
     pub(crate) held_cycles: u64,
@@ -1511,6 +1514,7 @@ mod tests {
             commands: 100,
             late,
             extrapolated_cycles: 40,
+            early_cycles: 5,
             held_cycles: 12,
             holds: 2,
         });
@@ -1524,6 +1528,7 @@ mod tests {
             (&r["extrapolated_cycles"], &r["held_cycles"], &r["holds"]),
             (&40.into(), &12.into(), &2.into())
         );
+        assert_eq!(r["early_cycles"], 5);
     }
 
     #[test]

@@ -1255,9 +1255,10 @@ fn motion_section(h: &mut String, s: &Summary) {
     if let Some(r) = &m.robot_servo {
         let late: u64 = r.late_by_cycles.iter().skip(1).sum();
         let v = format!(
-            "{} commands, {} of them late (≥ 1 cycle); {} cycles extrapolated, {} held in {} \
-             holds (a moving target older than the robot's extrapolation bound: the arm brakes)",
-            r.commands, late, r.extrapolated_cycles, r.held_cycles, r.holds
+            "{} commands, {} of them late (≥ 1 cycle); {} cycles extrapolated, {} evaluated back \
+             (a command meant for a later tick), {} held in {} holds (a moving target older than \
+             the robot's extrapolation bound: the arm brakes)",
+            r.commands, late, r.extrapolated_cycles, r.early_cycles, r.held_cycles, r.holds
         );
         let _ = writeln!(
             h,
