@@ -129,24 +129,31 @@ fn run(every: u64, feedforward: bool) -> Run {
     run_delayed(every, feedforward, &[0], true)
 }
 
+/// What a run starts from: a bench at the emulator's bound at speedup 4 (as the trial scales
+/// it: 4 × 6 ms), an empty feedforward estimator (as `RtdeRobot` keeps one), an empty record
+/// from the bench's joints, and the start time [s].
+fn run_start() -> (Bench, FeedforwardEstimator, Run, f64) {
+    let b = Bench::new(RegisterMap {
+        extrapolate_max_s: 0.024,
+        ..RegisterMap::default()
+    });
+    let est = FeedforwardEstimator::new(b.map.feedforward_max_gap_s());
+    let start = b.state();
+    let run = Run {
+        q0: start.actual_q,
+        states: Vec::new(),
+        targets: Vec::new(),
+    };
+    (b, est, run, start.timestamp_s)
+}
+
 /// As [`run`], but command i reaches the program `delays[i % len]` cycles after the state it
 /// was computed from (time on the wire, or an emulator burst the client did not see yet),
 /// and carries the valid tick of that state (`stamped`) or, as the age the client saw when
 /// sending did before, the tick of its arrival.
 fn run_delayed(every: u64, feedforward: bool, delays: &[u64], stamped: bool) -> Run {
-    let mut b = Bench::new(RegisterMap {
-        // As the trial scales it for the emulator at speedup 4: 4 × 6 ms.
-        extrapolate_max_s: 0.024,
-        ..RegisterMap::default()
-    });
-    let mut est = FeedforwardEstimator::new(b.map.feedforward_max_gap_s());
-    let start = b.state();
-    let (q0, t0) = (start.actual_q, start.timestamp_s);
-    let mut run = Run {
-        q0,
-        states: Vec::new(),
-        targets: Vec::new(),
-    };
+    let (mut b, mut est, mut run, t0) = run_start();
+    let q0 = run.q0;
     let cycles = ((PERIOD_S + 0.5) / CYCLE_S) as u64;
     let mut in_transit: std::collections::VecDeque<(u64, JointCommand, ServoFeedforward)> =
         std::collections::VecDeque::new();
@@ -587,29 +594,24 @@ fn servo_stats_count_late_commands_and_extrapolated_and_held_cycles() {
 #[test]
 fn an_early_command_is_evaluated_back_to_the_programs_tick() {
     let (mut b, q) = bench_at_rest();
-    let valid_tick = b.valid_tick(-1);
-    b.write(
-        &servo(q),
-        &ServoFeedforward {
-            qd: [0.5, 0.01, 0.0, 0.0, 0.0, 0.0],
-            qdd: [2.0, 3.0, 0.0, 0.0, 0.0, 0.0],
+    // Servo to q with feedforward qd and qdd on joints 0 and 1, meant for `ahead` ticks after
+    // the next one.
+    let early = |b: &mut Bench, qd: [f64; 2], qdd: [f64; 2], ahead: i32| {
+        let valid_tick = b.valid_tick(-ahead);
+        let ff = ServoFeedforward {
+            qd: [qd[0], qd[1], 0.0, 0.0, 0.0, 0.0],
+            qdd: [qdd[0], qdd[1], 0.0, 0.0, 0.0, 0.0],
             valid_tick,
-        },
-    );
+        };
+        b.write(&servo(q), &ff);
+    };
+    early(&mut b, [0.5, 0.01], [2.0, 3.0], 1);
     for (k, want) in [-0.000996, 0.0, 0.001004].into_iter().enumerate() {
         b.step();
         let got = b.latched_target()[0] - q[0];
         assert!((got - want).abs() < 1e-12, "cycle {k}: {got}");
     }
-    let valid_tick = b.valid_tick(-3);
-    b.write(
-        &servo(q),
-        &ServoFeedforward {
-            qd: [0.0, 0.01, 0.0, 0.0, 0.0, 0.0],
-            qdd: [0.0, 3.0, 0.0, 0.0, 0.0, 0.0],
-            valid_tick,
-        },
-    );
+    early(&mut b, [0.0, 0.01], [0.0, 3.0], 3);
     b.step();
     let got = b.latched_target()[1] - q[1];
     assert!((got + 1.0 / 60000.0).abs() < 1e-12, "{got}");
@@ -636,18 +638,8 @@ fn commands_stamped_ahead_are_as_smooth_as_commands_on_time() {
 /// Every cycle a command, computed and stamped for the tick after next (one cycle ahead) in
 /// every other stretch of `stretch` commands, for the next tick otherwise.
 fn run_stamped_ahead(stretch: u64) -> Run {
-    let mut b = Bench::new(RegisterMap {
-        extrapolate_max_s: 0.024,
-        ..RegisterMap::default()
-    });
-    let mut est = FeedforwardEstimator::new(b.map.feedforward_max_gap_s());
-    let start = b.state();
-    let (q0, t0) = (start.actual_q, start.timestamp_s);
-    let mut run = Run {
-        q0,
-        states: Vec::new(),
-        targets: Vec::new(),
-    };
+    let (mut b, mut est, mut run, t0) = run_start();
+    let q0 = run.q0;
     let cycles = ((PERIOD_S + 0.5) / CYCLE_S) as u64;
     let mut last_valid = i32::MIN;
     for k in 0..cycles {
