@@ -44,7 +44,7 @@
 //! | ID | requirement | threshold (default) | reaction | test |
 //! |---|---|---|---|---|
 //! | SAF-REQ-010 | the robot reports safety mode other than NORMAL, or a protective / emergency / stopped-due-to-safety bit | `safety_mode != 1`, bits 2, 7, 10 | halt and latch | `saf_req_010_robot_safety_stop_halts_and_latches`, `saf_req_010_fault_injection_protective_stop` |
-//! | SAF-REQ-009 | robot-state staleness | > 3 cycles without a new controller timestamp | stop | `saf_req_009_robot_state_staleness` |
+//! | SAF-REQ-009 | robot-state staleness (a `reset()` does not clear it: only a new state does) | > 3 cycles without a new controller timestamp | stop | `saf_req_009_robot_state_staleness` |
 //! | SAF-REQ-001 | non-finite or malformed command or input (robot state, world view, servoJ lookahead ∉ [0.03, 0.2] s or gain ∉ [100, 2000], speedJ acc ≤ 0, stop decel ≤ 0) | any NaN/∞ | stop (the robot holds) | `saf_req_001_non_finite_values_are_rejected`, `saf_req_001_fault_injection_nan_target` |
 //! | SAF-REQ-008 | perception staleness | age > 0.2 s; > 1 s | reduce the speed caps ×0.25; stop | `saf_req_008_perception_staleness`, `saf_req_008_fault_injection_perception_freeze` |
 //! | SAF-REQ-003 | joint speed implied by the command (servoJ: step / the controller time since the previous servo command, 1 to `command_period_cycles` (4 on a UR5e: its servo extrapolation bound + 1) cycles of 2 ms; speedJ: `qd`) | π rad/s | reduce | `saf_req_003_joint_speed_limit`, `saf_req_003_ramp_commanded_every_third_cycle_is_judged_over_the_elapsed_time`, `saf_req_003_a_gap_longer_than_the_command_period_is_judged_as_that_period`, `saf_req_003_the_default_command_period_is_the_ur5e_extrapolation_bound_plus_one` |

@@ -240,7 +240,10 @@ impl<R: Robot> Supervisor<R> {
         }
         self.latched = None;
         self.servo_ref = None;
-        self.stale_cycles = 0;
+        // The robot state's staleness (SAF-REQ-009) is not part of the latch: it counts the
+        // states as they come, and only a fresh state clears it. (Clearing it here let a
+        // reset during a frozen state pass commands for 3 more cycles; found by
+        // `saf_req_all_no_command_breaks_a_limit`.)
         self.counters.resets = self.counters.resets.saturating_add(1);
         tracing::info!(requirement = Requirement::Saf011Latch.id(), fault = %fault, "latched fault reset");
         Ok(())

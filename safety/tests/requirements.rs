@@ -449,6 +449,31 @@ fn saf_req_009_robot_state_staleness() {
             }
         }
     );
+    // A reset does not clear the staleness of a state that is still frozen (a latched fault
+    // from before the freeze may be reset once a newer state was read, but the state has
+    // stopped coming since): the next commands still stop.
+    let (mut s2, inner2) = rig(Q_WORK);
+    assert_eq!(cycle(&mut s2, &hold, &clear()), Verdict::Passed);
+    inner2.borrow_mut().state.safety_mode = safety_mode::PROTECTIVE_STOP;
+    assert!(cycle(&mut s2, &hold, &clear()).is_stop());
+    inner2.borrow_mut().state.safety_mode = safety_mode::NORMAL;
+    assert!(cycle(&mut s2, &hold, &clear()).is_stop()); // latched; a newer state without it
+    inner2.borrow_mut().freeze = true;
+    for _ in 0..4 {
+        assert!(cycle(&mut s2, &hold, &clear()).is_stop());
+    }
+    assert!(s2.latched().is_some());
+    s2.reset()
+        .expect("a newer state without the cause was read");
+    assert_eq!(
+        cycle(&mut s2, &hold, &clear()),
+        Verdict::Stopped {
+            violation: Violation::RobotStateStale {
+                cycles: 5,
+                limit_cycles: 3
+            }
+        }
+    );
     // Stepping without reading counts too.
     inner.borrow_mut().freeze = false;
     assert_eq!(cycle(&mut s, &hold, &clear()), Verdict::Passed);
