@@ -5,8 +5,9 @@
 //! One clock (a tokio task, or at speedup 3 and up an OS thread) steps the backend in 2 ms
 //! controller cycles on a virtual clock: one cycle every 2 ms / `speedup` of wall time (1 = real time; tests speed it up). The clock keeps
 //! absolute cycles (cycle n is due at start + n · 2 ms / speedup) and catches up after missed
-//! ones, within a bound per wake ([`plan_ticks`]); [`Emulator::clock_stats`] reports how far it
-//! fell behind. Each RTDE session
+//! ones: up to 20 ms of wall time by running a little faster for a while ([`Slew`]), beyond
+//! that in a burst within a bound per wake ([`plan_ticks`]); [`Emulator::clock_stats`] reports
+//! how far it fell behind. Each RTDE session
 //! is sampled from the virtual clock at its requested frequency, so what a client receives
 //! depends on virtual cycles only, not on scheduling jitter.
 //!
@@ -111,29 +112,111 @@ pub fn max_cycles_per_wake(speedup: u32) -> u64 {
 pub struct TickPlan {
     /// Cycles to run now [cycles].
     pub run: u64,
-    /// Of those, cycles run late: due before the newest due cycle, i.e. catching up [cycles].
+    /// Of those, cycles run late in a burst: all but the last of this wake [cycles].
     pub late: u64,
     /// Cycles due beyond the per-wake bound: skipped, never run [cycles].
     pub dropped: u64,
+    /// Cycles left due after this wake, within the slew allowance: the clock runs them one
+    /// per wake, a little faster than its period ([`Slew`]) [cycles].
+    pub behind: u64,
 }
 
 /// The clock's schedule for one wake: `due` cycles are due since the start (wall time elapsed
-/// × speedup / 2 ms, rounded down), `done` have been run or dropped before, and at most
-/// `max_per_wake` (taken as at least 1) run now. The rest of the backlog is dropped, so after
-/// this wake `done + run + dropped == due` whenever `due >= done`.
-pub fn plan_ticks(due: u64, done: u64, max_per_wake: u64) -> TickPlan {
-    let behind = due.saturating_sub(done);
-    let run = behind.min(max_per_wake.max(1));
+/// × speedup / 2 ms, rounded down), `done` have been run or dropped before, up to `allowance`
+/// of the backlog may stay behind (slewed, [`Slew`]) and at most `max_per_wake` (taken as at
+/// least 1) run now. Whenever a cycle is due at least one runs; what the allowance and the
+/// bound leave is dropped, so after this wake `done + run + dropped + behind == due` whenever
+/// `due >= done`.
+pub fn plan_ticks(due: u64, done: u64, max_per_wake: u64, allowance: u64) -> TickPlan {
+    let backlog = due.saturating_sub(done);
+    let behind = allowance.min(backlog.saturating_sub(1));
+    let wanted = backlog - behind;
+    let run = wanted.min(max_per_wake.max(1));
     TickPlan {
         run,
         late: run.saturating_sub(1),
-        dropped: behind - run,
+        dropped: wanted - run,
+        behind,
+    }
+}
+
+/// How fast the emulator's clock works off a backlog [-]: 0.25, i.e. after its thread ran late
+/// it runs its cycles at up to 1.25 × its rate until it is back on wall time ([`Slew`]).
+pub const SLEW_RATE: f64 = 0.25;
+
+/// The largest backlog the clock slews [ms of wall time]: 20 ms (10 × speedup cycles,
+/// [`slew_window`]). A longer stall (a stopped process) runs the excess at once, as a burst,
+/// within [`max_cycles_per_wake`].
+pub const SLEW_WINDOW_WALL_MS: u64 = 20;
+
+/// [`SLEW_WINDOW_WALL_MS`] at `speedup` [cycles]: 10 × speedup (speedup 0 counts as 1).
+pub fn slew_window(speedup: u32) -> u64 {
+    (SLEW_WINDOW_WALL_MS * 1_000_000 / CYCLE_NS).saturating_mul(u64::from(speedup.max(1)))
+}
+
+/// The emulator clock's slew: how many cycles it may trail wall time, in controller cycles.
+///
+/// A controller's clock never stops, but the emulator's thread does (a busy or virtual machine
+/// preempts it for milliseconds). Running the missed cycles in one burst, as the clock did
+/// before, handed the client several samples at once with no time to answer them: the
+/// program then extrapolated, and past its bound held, although the client had not been late
+/// (issue 10: 4 of 6 and 9 of 14 holds in two speedup-4 trials began in such a burst). Like
+/// an NTP daemon slewing a system clock instead of stepping it, the clock instead keeps the
+/// backlog as a lag (at most [`slew_window`]), runs one cycle per wake, and wakes early
+/// enough to work the lag off at [`SLEW_RATE`] of wall time: the client sees one sample at a
+/// time, on a clock that runs 25 % fast for a while. The virtual clock stays on wall time in
+/// the long run (issue 11).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Slew {
+    /// The lag set at the last stall [cycles].
+    lag0: f64,
+    /// When it was set, in cycles elapsed by wall time [cycles].
+    since: f64,
+}
+
+impl Slew {
+    /// The lag allowed at `v` cycles elapsed by wall time (fractional) [cycles]: the last
+    /// stall's, less [`SLEW_RATE`] per cycle since, never below 0.
+    pub fn lag(&self, v: f64) -> f64 {
+        (self.lag0 - SLEW_RATE * (v - self.since)).max(0.0)
+    }
+
+    /// A wake at `v` cycles elapsed (fractional) with `done` cycles run, dropped or paused
+    /// before: a backlog (beyond the cycle run now) larger than the allowed lag is a new
+    /// stall and becomes the lag, at most `window`. Returns the allowance for
+    /// [`plan_ticks`] in whole cycles.
+    pub fn on_wake(&mut self, v: f64, done: u64, window: u64) -> u64 {
+        let backlog = (v.floor() - done as f64 - 1.0).max(0.0);
+        if backlog > self.lag(v) {
+            self.lag0 = backlog.min(window as f64);
+            self.since = v;
+        }
+        // In [0, window]: the cast neither wraps nor saturates.
+        self.lag(v).floor() as u64
+    }
+
+    /// No lag (after a pause, whose cycles are not made up).
+    pub fn reset(&mut self) {
+        *self = Slew::default();
+    }
+
+    /// When cycle `done + 1` is due on the slewed clock, in cycles elapsed by wall time
+    /// (fractional): where `v − lag(v)` reaches `done + 1`. Without a lag that is `done + 1`
+    /// itself, the cycle's own time.
+    pub fn next_due(&self, done: u64) -> f64 {
+        let n = done as f64 + 1.0;
+        let expires = self.since + self.lag0 / SLEW_RATE;
+        if n >= expires {
+            n
+        } else {
+            (n + self.lag0 + SLEW_RATE * self.since) / (1.0 + SLEW_RATE)
+        }
     }
 }
 
 /// How the emulator's clock kept up with wall time ([`Emulator::clock_stats`]), in controller
 /// cycles. As of the clock's last wake,
-/// `cycles_run + cycles_dropped + cycles_paused == cycles_elapsed` exactly.
+/// `cycles_run + cycles_dropped + cycles_paused + cycles_behind == cycles_elapsed` exactly.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct ClockStats {
     /// Cycles due since the start (wall time × speedup / 2 ms), as of the clock's last wake
@@ -151,6 +234,17 @@ pub struct ClockStats {
     pub cycles_paused: u64,
     /// The largest backlog seen at one wake, before catching up [cycles] (speedup on time).
     pub max_behind_cycles: u64,
+    /// Cycles due and not yet run, as of the last wake: the lag being slewed ([`Slew`])
+    /// [cycles].
+    pub cycles_behind: u64,
+    /// Cycles run one per wake while the clock trailed wall time, slewing [cycles].
+    pub cycles_slewed: u64,
+    /// Wakes that ran more than one cycle: the clock itself was late (its thread not run in
+    /// time) beyond what it slews, so the client saw those samples only together [-].
+    pub bursts: u64,
+    /// Servo holds ([`ServoStats::holds`]) that began in such a burst: the program ran past its
+    /// extrapolation bound while the emulator, not the client, was late [-].
+    pub holds_in_bursts: u64,
 }
 
 /// How our control program's servo commands reached it and what it did with them, counted
@@ -1543,8 +1637,10 @@ pub fn clock_on_own_thread(speedup: u32) -> bool {
 
 /// The emulator's clock: cycle n is due at start + n · 2 ms / speedup (absolute, so lateness
 /// does not accumulate as it did with a delayed interval: under load the virtual clock ran at
-/// 0.56–0.85 of wall time). Each wake runs the cycles due since the last one, within
-/// [`max_cycles_per_wake`]; while paused, due cycles are skipped and counted as paused.
+/// 0.56–0.85 of wall time). Each wake runs one cycle; a backlog after a late wake is worked
+/// off by waking a little early ([`Slew`]), and only what exceeds [`slew_window`] runs at
+/// once, within [`max_cycles_per_wake`]; while paused, due cycles are skipped and counted as
+/// paused.
 ///
 /// One cycle per wake is what a client sees from a real controller: one sample every cycle
 /// period and the rest of the period to answer. Until issue 10 the clock ran `speedup` cycles
@@ -1559,8 +1655,11 @@ struct Clock {
     world: Arc<Mutex<World>>,
     per: u64,
     max: u64,
+    window: u64,
     start: Instant,
+    /// Cycles run, dropped or paused [cycles].
     done: u64,
+    slew: Slew,
 }
 
 impl Clock {
@@ -1569,39 +1668,65 @@ impl Clock {
             world,
             per: u64::from(speedup.max(1)),
             max: max_cycles_per_wake(speedup),
+            window: slew_window(speedup),
             start: Instant::now(),
             done: 0,
+            slew: Slew::default(),
         }
     }
 
-    /// When the next cycle is due.
+    /// When the next cycle is due: its own time, or earlier while slewing a lag.
     fn next_due(&self) -> Instant {
-        self.start + cycle_due_at(self.done.saturating_add(1), self.per)
+        let v = self.slew.next_due(self.done);
+        let secs = v * (CYCLE_NS as f64 / 1e9) / self.per as f64;
+        // Out of range only after centuries; waking now is then harmless (wake runs what is
+        // due, if anything).
+        Duration::try_from_secs_f64(secs)
+            .ok()
+            .and_then(|d| self.start.checked_add(d))
+            .unwrap_or_else(Instant::now)
     }
 
     /// Runs the cycles due now (see [`Clock`]).
     fn wake(&mut self) {
         let elapsed = self.start.elapsed().as_nanos();
-        let due =
-            u64::try_from(elapsed.saturating_mul(u128::from(self.per)) / u128::from(CYCLE_NS))
-                .unwrap_or(u64::MAX)
-                .max(self.done);
+        let scaled = elapsed.saturating_mul(u128::from(self.per));
+        let due = u64::try_from(scaled / u128::from(CYCLE_NS))
+            .unwrap_or(u64::MAX)
+            .max(self.done);
+        // Fractional cycles elapsed, for the slew (f64 holds them exactly enough: 2^53 cycles).
+        let v = scaled as f64 / CYCLE_NS as f64;
         let done = self.done;
-        self.done = due;
         let mut w = lock(&self.world);
         w.clock.cycles_elapsed = due;
         if w.paused {
             w.clock.cycles_paused += due - done;
+            w.clock.cycles_behind = 0;
+            self.done = due;
+            self.slew.reset();
             return;
         }
-        let plan = plan_ticks(due, done, self.max);
+        let allowance = self.slew.on_wake(v, done, self.window);
+        let plan = plan_ticks(due, done, self.max, allowance);
+        self.done = due - plan.behind;
         w.clock.max_behind_cycles = w.clock.max_behind_cycles.max(due - done);
+        let burst = plan.run > 1;
+        let holds = |w: &World| w.backend.servo_stats().map_or(0, |s| s.holds);
+        let holds_before = if burst { holds(&w) } else { 0 };
         for _ in 0..plan.run {
             w.step();
+        }
+        if burst {
+            w.clock.bursts += 1;
+            w.clock.holds_in_bursts += holds(&w).saturating_sub(holds_before);
         }
         w.clock.cycles_run += plan.run;
         w.clock.cycles_late += plan.late;
         w.clock.cycles_dropped += plan.dropped;
+        w.clock.cycles_behind = plan.behind;
+        if plan.behind > 0 {
+            w.clock.cycles_slewed += plan.run;
+        }
         if plan.dropped > 0 {
             tracing::warn!(
                 "emulator: clock {} ms behind wall time; dropped {} cycles (at most {} \

@@ -11,8 +11,8 @@ use std::time::Duration;
 use common::{REPLY_TIMEOUT, Raw, TEST_TIMEOUT, sim_emulator};
 use robot_io::codec::{ClientPackage, ControllerPackage, DataPackage, FieldType, Value};
 use robot_io::emulator::{
-    ClockStats, Emulator, EmulatorConfig, MAX_DASHBOARD_LINE, ReplayMode, TickPlan, TraceBackend,
-    clock_on_own_thread, max_cycles_per_wake, plan_ticks,
+    ClockStats, Emulator, EmulatorConfig, MAX_DASHBOARD_LINE, ReplayMode, SLEW_RATE, Slew,
+    TickPlan, TraceBackend, clock_on_own_thread, max_cycles_per_wake, plan_ticks, slew_window,
 };
 use robot_io::trace::Trace;
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
@@ -198,25 +198,73 @@ async fn trace_replay_sends_the_first_row_first() {
 }
 
 /// The clock's per-wake schedule (in controller cycles), with exact numbers: on time one
-/// cycle runs; after missed cycles the backlog runs (all but the newest late); beyond the bound the excess is dropped,
-/// never deferred; nothing is due, nothing runs. `done + run + dropped == due` throughout.
+/// cycle runs; after missed cycles without a slew allowance the backlog runs (all but the
+/// newest late); beyond the bound the excess is dropped, never deferred; nothing is due,
+/// nothing runs. With an allowance that much of the backlog stays behind, but a due cycle
+/// always runs. `done + run + dropped + behind == due` throughout.
 #[test]
 fn the_clock_catches_up_missed_ticks_within_the_bound_and_counts_the_rest_dropped() {
-    let plan = |run, late, dropped| TickPlan { run, late, dropped };
-    assert_eq!(plan_ticks(1, 0, 50), plan(1, 0, 0), "on time");
-    assert_eq!(plan_ticks(10, 10, 50), plan(0, 0, 0), "nothing due");
-    assert_eq!(plan_ticks(17, 10, 50), plan(7, 6, 0), "caught up");
-    assert_eq!(plan_ticks(60, 10, 50), plan(50, 49, 0), "exactly the bound");
-    assert_eq!(plan_ticks(1010, 10, 50), plan(50, 49, 950), "a 2 s stall");
+    let plan = |run, late, dropped, behind| TickPlan {
+        run,
+        late,
+        dropped,
+        behind,
+    };
+    assert_eq!(plan_ticks(1, 0, 50, 0), plan(1, 0, 0, 0), "on time");
+    assert_eq!(plan_ticks(10, 10, 50, 0), plan(0, 0, 0, 0), "nothing due");
+    assert_eq!(plan_ticks(17, 10, 50, 0), plan(7, 6, 0, 0), "caught up");
     assert_eq!(
-        plan_ticks(5, 3, 0),
-        plan(1, 0, 1),
+        plan_ticks(60, 10, 50, 0),
+        plan(50, 49, 0, 0),
+        "exactly the bound"
+    );
+    assert_eq!(
+        plan_ticks(1010, 10, 50, 0),
+        plan(50, 49, 950, 0),
+        "a 2 s stall"
+    );
+    assert_eq!(
+        plan_ticks(5, 3, 0, 0),
+        plan(1, 0, 1, 0),
         "a bound of 0 counts as 1"
     );
-    assert_eq!(plan_ticks(3, 5, 50), plan(0, 0, 0), "done ahead of due");
+    assert_eq!(
+        plan_ticks(3, 5, 50, 0),
+        plan(0, 0, 0, 0),
+        "done ahead of due"
+    );
+    // Slewing: 7 due, 6 of them may stay behind: one runs.
+    assert_eq!(plan_ticks(17, 10, 50, 6), plan(1, 0, 0, 6), "slewed");
+    assert_eq!(
+        plan_ticks(17, 10, 50, 40),
+        plan(1, 0, 0, 6),
+        "allowance > backlog"
+    );
+    assert_eq!(
+        plan_ticks(17, 10, 50, 4),
+        plan(3, 2, 0, 4),
+        "backlog > allowance"
+    );
+    assert_eq!(
+        plan_ticks(10, 10, 50, 4),
+        plan(0, 0, 0, 0),
+        "slewing, nothing due"
+    );
+    assert_eq!(
+        plan_ticks(1010, 10, 50, 40),
+        plan(50, 49, 910, 40),
+        "a 2 s stall keeps 40 to slew"
+    );
     for (due, done) in [(0, 0), (1, 0), (17, 10), (1010, 10), (u64::MAX, 0)] {
-        let p = plan_ticks(due, done, 50);
-        assert_eq!(done + p.run + p.dropped, due, "due {due}, done {done}");
+        for allowance in [0, 1, 6, 40, u64::MAX] {
+            let p = plan_ticks(due, done, 50, allowance);
+            assert_eq!(
+                done + p.run + p.dropped + p.behind,
+                due,
+                "due {due}, done {done}, allowance {allowance}"
+            );
+            assert_eq!(p.run >= 1, due > done, "a due cycle runs");
+        }
     }
     // The bound: the cycles of 100 ms of wall time (50 × speedup), and at most 1000.
     assert_eq!(max_cycles_per_wake(0), 50, "speedup 0 counts as 1");
@@ -234,14 +282,79 @@ fn the_clock_catches_up_missed_ticks_within_the_bound_and_counts_the_rest_droppe
     assert!(clock_on_own_thread(100));
 }
 
+/// The clock's slew, worked by hand (cycles elapsed by wall time are fractional, SLEW_RATE
+/// 0.25, window 40): on time nothing lags and the next cycle is due at its own time. A wake at
+/// 17.5 with 10 cycles done finds 7 due: one runs now and the other 6 become the lag. Cycle 12
+/// is then due where v − lag(v) = 12, lag(v) = 6 − 0.25·(v − 17.5): v = (12 + 6 + 0.25·17.5) /
+/// 1.25 = 17.9 (lag 5.9, so allowance 5 there, and one cycle runs). Woken at each such time
+/// the clock runs exactly one cycle per wake, 0.8 of a period apart; nothing is left behind
+/// once the lag is under one cycle, from 17.5 + 5 / 0.25 = 37.5 on (the wake at 37.9), and
+/// the lag has run out at 17.5 + 6 / 0.25 = 41.5 (the last early wake at (41 + 10.375) /
+/// 1.25 = 41.1, then cycle 42 at its own time). A backlog beyond the window keeps only the
+/// window.
+#[test]
+fn the_clock_slews_a_backlog_one_cycle_per_wake_at_a_quarter_over_its_rate() {
+    assert_eq!(SLEW_RATE, 0.25);
+    assert_eq!(slew_window(1), 10);
+    assert_eq!(slew_window(4), 40);
+    assert_eq!(slew_window(0), 10, "speedup 0 counts as 1");
+    let mut s = Slew::default();
+    assert_eq!(s.on_wake(10.3, 10, 40), 0, "on time");
+    assert_eq!(s.next_due(10), 11.0);
+    assert_eq!(s.on_wake(17.5, 10, 40), 6, "a stall of 7 cycles");
+    assert_eq!(s.lag(17.5), 6.0);
+    assert_eq!(plan_ticks(17, 10, 50, 6).run, 1);
+    assert!((s.next_due(11) - 17.9).abs() < 1e-12, "{}", s.next_due(11));
+    assert!((s.lag(17.9) - 5.9).abs() < 1e-12);
+    assert_eq!(s.on_wake(17.9, 11, 40), 5, "within the lag: no new stall");
+    let (mut done, mut prev) = (12, 17.9);
+    let mut caught_up = None;
+    loop {
+        let v = s.next_due(done);
+        if v > 41.5 {
+            break;
+        }
+        assert!(
+            (v - prev - 0.8).abs() < 1e-9,
+            "0.8 periods apart: {prev} → {v}"
+        );
+        let allowance = s.on_wake(v + 1e-9, done, 40);
+        let p = plan_ticks(v.floor() as u64, done, 50, allowance);
+        assert_eq!((p.run, p.dropped), (1, 0), "one cycle per wake at {v}");
+        done = v.floor() as u64 - p.behind;
+        if p.behind == 0 && caught_up.is_none() {
+            caught_up = Some(v);
+        }
+        prev = v;
+    }
+    let caught_up = caught_up.expect("caught up");
+    assert!(
+        (caught_up - 37.9).abs() < 1e-9,
+        "nothing behind from {caught_up}"
+    );
+    assert!((prev - 41.1).abs() < 1e-9, "last early wake at {prev}");
+    assert_eq!(done, 41, "back on wall time");
+    assert_eq!(s.next_due(done), 42.0, "and on its own period again");
+    // Beyond the window: only the window stays behind; reset drops the lag.
+    assert_eq!(s.on_wake(200.0, 41, 40), 40);
+    assert_eq!(plan_ticks(200, 41, 200, 40).behind, 40);
+    s.reset();
+    assert_eq!(s.lag(200.0), 0.0);
+}
+
 /// Checks the clock invariants of [`ClockStats`] on `s`.
 fn consistent(s: ClockStats) -> ClockStats {
     assert_eq!(
-        s.cycles_run + s.cycles_dropped + s.cycles_paused,
+        s.cycles_run + s.cycles_dropped + s.cycles_paused + s.cycles_behind,
         s.cycles_elapsed,
         "{s:?}"
     );
     assert!(s.cycles_late <= s.cycles_run, "{s:?}");
+    assert!(s.cycles_slewed <= s.cycles_run, "{s:?}");
+    // A burst holds the emulator's state: no command arrives within it, so at most one hold
+    // begins in it.
+    assert!(s.holds_in_bursts <= s.bursts, "{s:?}");
+    assert!(s.cycles_behind <= slew_window(100), "{s:?}");
     s
 }
 

@@ -155,6 +155,9 @@ impl TrialRobot for PacedRtde {
     fn servo_stats(&self) -> Option<robot_io::emulator::ServoStats> {
         self.emulator.as_ref().and_then(|e| e.servo_stats())
     }
+    fn emulator_clock(&self) -> Option<robot_io::emulator::ClockStats> {
+        self.emulator.as_ref().map(|e| e.clock_stats())
+    }
 }
 
 /// What keeps an RTDE robot's connection alive: the emulator (`None` for a real robot) and the

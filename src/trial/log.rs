@@ -456,6 +456,13 @@ impl TrialLog {
             .compression(Some(mcap::Compression::Zstd))
             .profile("")
             .library("hrc-adapt")
+            // Compress on the thread that closes the chunk (the log writer or the cue cycle,
+            // both at background priority), not on zstd's worker threads: mcap starts one per
+            // physical CPU at normal priority, and each chunk's compression then took every
+            // core from the control thread and the emulator's clock (issue 10: 96 of the 118
+            // gaps of ≥ 8 ms in the loop's samples of one emulator run began within 50 ms after
+            // a chunk closed).
+            .compression_threads(0)
             // Chunks close on `chunk_period_s` of trial time, or at 4 MiB, whichever is first.
             .chunk_size(Some(4 << 20));
         let mut mcap = write_options
@@ -779,6 +786,11 @@ impl TrialLog {
     /// `summary.json`'s `motion.robot_servo`.
     pub(crate) fn set_robot_servo(&mut self, stats: robot_io::emulator::ServoStats) {
         self.motion.set_robot_servo(stats);
+    }
+
+    /// `summary.json`'s `motion.emulator_clock`.
+    pub(crate) fn set_emulator_clock(&mut self, stats: robot_io::emulator::ClockStats) {
+        self.motion.set_emulator_clock(stats);
     }
 
     /// Drains the ring, closes every file, writes `summary.json` and the report.

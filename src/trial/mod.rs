@@ -24,6 +24,7 @@ mod events;
 mod live;
 mod log;
 pub mod operator;
+mod priority;
 pub(crate) mod prompt;
 mod report;
 pub mod runtime;

@@ -66,7 +66,7 @@
 use std::collections::{BTreeMap, VecDeque};
 
 use robot_io::RobotState;
-use robot_io::emulator::{SERVO_LATE_BINS, ServoStats};
+use robot_io::emulator::{ClockStats, SERVO_LATE_BINS, ServoStats};
 use safety::{Requirement, Verdict, Violation};
 use serde::Serialize;
 
@@ -447,6 +447,8 @@ pub(crate) struct MotionMetrics {
     /// The robot side's own count of what it did with the servo commands (the in-process
     /// emulator only).
     robot_servo: Option<ServoStats>,
+    /// The in-process emulator's own clock (emulator runs only).
+    emulator_clock: Option<ClockStats>,
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -471,6 +473,12 @@ impl MotionMetrics {
     /// of the trial (`motion.robot_servo`).
     pub(crate) fn set_robot_servo(&mut self, stats: ServoStats) {
         self.robot_servo = Some(stats);
+    }
+
+    /// How the in-process emulator's clock kept up with wall time, at the end of the trial
+    /// (`motion.emulator_clock`).
+    pub(crate) fn set_emulator_clock(&mut self, stats: ClockStats) {
+        self.emulator_clock = Some(stats);
     }
 
     /// Empty metrics with every buffer preallocated.
@@ -505,6 +513,7 @@ impl MotionMetrics {
             time_scale_n: 0,
             time_scale_min: f64::INFINITY,
             robot_servo: None,
+            emulator_clock: None,
         }
     }
 
@@ -889,6 +898,16 @@ impl MotionMetrics {
                 held_cycles: s.held_cycles,
                 holds: s.holds,
             }),
+            emulator_clock: self.emulator_clock.map(|c| EmulatorClockSummary {
+                cycles_elapsed: c.cycles_elapsed,
+                cycles_run: c.cycles_run,
+                cycles_late: c.cycles_late,
+                cycles_dropped: c.cycles_dropped,
+                max_behind_cycles: c.max_behind_cycles,
+                cycles_slewed: c.cycles_slewed,
+                bursts: c.bursts,
+                holds_in_bursts: c.holds_in_bursts,
+            }),
         }
     }
 }
@@ -913,6 +932,29 @@ pub(crate) struct RobotServoSummary {
     pub(crate) held_cycles: u64,
     /// Separate runs of held cycles.
     pub(crate) holds: u64,
+}
+
+/// `motion.emulator_clock`: how the in-process emulator's own clock kept up with wall time
+/// (`robot_io::emulator::ClockStats`), so that what the emulator's host did is told apart
+/// from what the client did. Emulator runs only.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) struct EmulatorClockSummary {
+    /// Controller cycles due since the emulator started (wall time × speedup / 2 ms).
+    pub(crate) cycles_elapsed: u64,
+    /// Cycles run.
+    pub(crate) cycles_run: u64,
+    /// Cycles run late, in a burst (a backlog beyond the 20 ms the clock slews).
+    pub(crate) cycles_late: u64,
+    /// Cycles never run (the backlog beyond the per-wake bound).
+    pub(crate) cycles_dropped: u64,
+    /// The largest backlog at one wake.
+    pub(crate) max_behind_cycles: u64,
+    /// Cycles run one per wake while the clock worked off a backlog at 1.25 × its rate.
+    pub(crate) cycles_slewed: u64,
+    /// Wakes that ran more than one cycle.
+    pub(crate) bursts: u64,
+    /// Servo holds that began in such a burst (the emulator late, not the client).
+    pub(crate) holds_in_bursts: u64,
 }
 
 /// `motion` in `summary.json` (README.md, "Motion quality metrics").
@@ -941,6 +983,9 @@ pub(crate) struct MotionSummary {
     /// What the robot side did with the servo commands (emulator runs only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub(crate) robot_servo: Option<RobotServoSummary>,
+    /// How the emulator's own clock kept up (emulator runs only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub(crate) emulator_clock: Option<EmulatorClockSummary>,
 }
 
 /// Counts of one requirement.
@@ -1501,10 +1546,12 @@ mod tests {
     /// µs) is in [94.41, 100) µs, whose edge 100 µs is also the maximum. No jitter values (mock
     /// clock): `null`.
     #[test]
-    fn robot_servo_statistics_are_passed_through_and_absent_without_an_emulator() {
+    fn robot_servo_and_emulator_clock_statistics_are_passed_through_and_absent_without_an_emulator()
+    {
         let mut m = MotionMetrics::new();
         let json = serde_json::to_value(summary(&mut m)).unwrap();
         assert!(json.get("robot_servo").is_none(), "{json}");
+        assert!(json.get("emulator_clock").is_none(), "{json}");
         let mut late = [0; SERVO_LATE_BINS];
         late[0] = 90;
         late[3] = 7;
@@ -1529,6 +1576,32 @@ mod tests {
             (&40.into(), &12.into(), &2.into())
         );
         assert_eq!(r["early_cycles"], 5);
+        m.set_emulator_clock(ClockStats {
+            cycles_elapsed: 1000,
+            cycles_run: 990,
+            cycles_late: 12,
+            cycles_dropped: 4,
+            cycles_paused: 0,
+            max_behind_cycles: 41,
+            cycles_behind: 6,
+            cycles_slewed: 300,
+            bursts: 3,
+            holds_in_bursts: 1,
+        });
+        let json = serde_json::to_value(summary(&mut m)).unwrap();
+        let c = &json["emulator_clock"];
+        for (k, v) in [
+            ("cycles_elapsed", 1000),
+            ("cycles_run", 990),
+            ("cycles_late", 12),
+            ("cycles_dropped", 4),
+            ("max_behind_cycles", 41),
+            ("cycles_slewed", 300),
+            ("bursts", 3),
+            ("holds_in_bursts", 1),
+        ] {
+            assert_eq!(c[k], v, "{k}: {c}");
+        }
     }
 
     #[test]

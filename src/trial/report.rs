@@ -1267,6 +1267,27 @@ fn motion_section(h: &mut String, s: &Summary) {
             esc(&v)
         );
     }
+    if let Some(c) = &m.emulator_clock {
+        let v = format!(
+            "{} cycles run of {} due; {} slewed (run at 1.25 × the rate after the emulator's \
+             thread ran late), {} run late in {} bursts (a backlog beyond 20 ms), {} dropped; \
+             largest backlog {} cycles; {} servo holds began in a burst",
+            c.cycles_run,
+            c.cycles_elapsed,
+            c.cycles_slewed,
+            c.cycles_late,
+            c.bursts,
+            c.cycles_dropped,
+            c.max_behind_cycles,
+            c.holds_in_bursts
+        );
+        let _ = writeln!(
+            h,
+            "<tr><th>{}</th><td>{}</td></tr>",
+            esc("emulator clock (its host, not the client)"),
+            esc(&v)
+        );
+    }
     h.push_str("</table>\n");
 
     let i = &m.interventions;

@@ -348,6 +348,11 @@ pub(crate) trait TrialRobot: Robot + Send {
     fn servo_stats(&self) -> Option<robot_io::emulator::ServoStats> {
         None
     }
+    /// How the in-process emulator's own clock kept up with wall time (`None` for other
+    /// robots): written into `summary.json`'s `motion.emulator_clock`.
+    fn emulator_clock(&self) -> Option<robot_io::emulator::ClockStats> {
+        None
+    }
 }
 
 impl TrialRobot for LockstepSim {}
@@ -770,6 +775,9 @@ fn drive<R: TrialRobot>(
     // 3. Every log, with the reason.
     if let Some(st) = cc.supervisor.robot().servo_stats() {
         log.set_robot_servo(st);
+    }
+    if let Some(st) = cc.supervisor.robot().emulator_clock() {
+        log.set_emulator_clock(st);
     }
     let event = log.event(t_end, &TrialEvent::Finished { reason });
     let finished = log.finish();
@@ -1276,6 +1284,7 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
 /// something to write.
 mod threaded {
     use super::*;
+    use crate::trial::priority::Background;
 
     /// Control-rate records the ring holds [-]: 4 per cycle, ≈ 4 s of the control rate.
     const CONTROL_LOG_RECORDS: usize = 8192;
@@ -1389,6 +1398,7 @@ mod threaded {
     /// [`WRITER_POLL_MS`] (chunk compression and file writes happen here, off the control
     /// thread and off the cue cycle's frames) until `stop`, then once more.
     pub(super) fn log_writer(sink: &Mutex<LogSink<'_>>, stop: &AtomicBool) -> crate::Result<()> {
+        let _background = Background::enter();
         loop {
             let last = stop.load(Ordering::Acquire);
             lock_sink(sink).absorb()?;
@@ -1862,10 +1872,21 @@ mod tests {
         let cycles = json["motion"]["control_cycles"].as_u64().unwrap();
         assert!(
             commands > cycles / 2 && commands <= cycles,
-            "{commands} of {cycles}"
+            "{commands} of {cycles}: {}",
+            json["motion"]["cycles"]
         );
+        // The emulator's own clock: every cycle due is run, dropped, or still behind.
+        let clock = &json["motion"]["emulator_clock"];
+        let n = |k: &str| clock[k].as_u64().unwrap_or_else(|| panic!("{k}: {clock}"));
+        assert!(n("cycles_run") > 0, "{clock}");
+        assert!(
+            n("cycles_run") + n("cycles_dropped") <= n("cycles_elapsed"),
+            "{clock}"
+        );
+        assert!(n("holds_in_bursts") <= n("bursts"), "{clock}");
         let report = std::fs::read_to_string(out.join("report.html")).unwrap();
         assert!(report.contains("robot side (emulator): servo commands"));
+        assert!(report.contains("emulator clock (its host, not the client)"));
         // Paced on the controller clock: about 6 s of trial time were assessed at 30 Hz.
         let rows = std::fs::read_to_string(out.join("indicators.csv"))
             .unwrap()
@@ -1965,6 +1986,7 @@ mod tests {
         // No RTDE link on the mock clock: no robot-side servo statistics (emulator only).
         let summary = std::fs::read_to_string(da.join("summary.json")).unwrap();
         assert!(!summary.contains("robot_servo"), "{summary}");
+        assert!(!summary.contains("emulator_clock"), "{summary}");
         let report = std::fs::read_to_string(da.join("report.html")).unwrap();
         assert!(!report.contains("robot side (emulator)"));
         let other = tempfile::tempdir().unwrap();
