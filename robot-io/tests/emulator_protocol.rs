@@ -210,51 +210,32 @@ fn the_clock_catches_up_missed_ticks_within_the_bound_and_counts_the_rest_droppe
         dropped,
         behind,
     };
-    assert_eq!(plan_ticks(1, 0, 50, 0), plan(1, 0, 0, 0), "on time");
-    assert_eq!(plan_ticks(10, 10, 50, 0), plan(0, 0, 0, 0), "nothing due");
-    assert_eq!(plan_ticks(17, 10, 50, 0), plan(7, 6, 0, 0), "caught up");
-    assert_eq!(
-        plan_ticks(60, 10, 50, 0),
-        plan(50, 49, 0, 0),
-        "exactly the bound"
-    );
-    assert_eq!(
-        plan_ticks(1010, 10, 50, 0),
-        plan(50, 49, 950, 0),
-        "a 2 s stall"
-    );
-    assert_eq!(
-        plan_ticks(5, 3, 0, 0),
-        plan(1, 0, 1, 0),
-        "a bound of 0 counts as 1"
-    );
-    assert_eq!(
-        plan_ticks(3, 5, 50, 0),
-        plan(0, 0, 0, 0),
-        "done ahead of due"
-    );
-    // Slewing: 7 due, 6 of them may stay behind: one runs.
-    assert_eq!(plan_ticks(17, 10, 50, 6), plan(1, 0, 0, 6), "slewed");
-    assert_eq!(
-        plan_ticks(17, 10, 50, 40),
-        plan(1, 0, 0, 6),
-        "allowance > backlog"
-    );
-    assert_eq!(
-        plan_ticks(17, 10, 50, 4),
-        plan(3, 2, 0, 4),
-        "backlog > allowance"
-    );
-    assert_eq!(
-        plan_ticks(10, 10, 50, 4),
-        plan(0, 0, 0, 0),
-        "slewing, nothing due"
-    );
-    assert_eq!(
-        plan_ticks(1010, 10, 50, 40),
-        plan(50, 49, 910, 40),
-        "a 2 s stall keeps 40 to slew"
-    );
+    // (due, done, max per wake, allowance) → (run, late, dropped, behind).
+    for ((due, done, max, allowance), (run, late, dropped, behind), why) in [
+        ((1, 0, 50, 0), (1, 0, 0, 0), "on time"),
+        ((10, 10, 50, 0), (0, 0, 0, 0), "nothing due"),
+        ((17, 10, 50, 0), (7, 6, 0, 0), "caught up"),
+        ((60, 10, 50, 0), (50, 49, 0, 0), "exactly the bound"),
+        ((1010, 10, 50, 0), (50, 49, 950, 0), "a 2 s stall"),
+        ((5, 3, 0, 0), (1, 0, 1, 0), "a bound of 0 counts as 1"),
+        ((3, 5, 50, 0), (0, 0, 0, 0), "done ahead of due"),
+        // Slewing: 7 due, 6 of them may stay behind: one runs.
+        ((17, 10, 50, 6), (1, 0, 0, 6), "slewed"),
+        ((17, 10, 50, 40), (1, 0, 0, 6), "allowance > backlog"),
+        ((17, 10, 50, 4), (3, 2, 0, 4), "backlog > allowance"),
+        ((10, 10, 50, 4), (0, 0, 0, 0), "slewing, nothing due"),
+        (
+            (1010, 10, 50, 40),
+            (50, 49, 910, 40),
+            "a 2 s stall keeps 40 to slew",
+        ),
+    ] {
+        assert_eq!(
+            plan_ticks(due, done, max, allowance),
+            plan(run, late, dropped, behind),
+            "{why}"
+        );
+    }
     for (due, done) in [(0, 0), (1, 0), (17, 10), (1010, 10), (u64::MAX, 0)] {
         for allowance in [0, 1, 6, 40, u64::MAX] {
             let p = plan_ticks(due, done, 50, allowance);
