@@ -1856,7 +1856,10 @@ mod tests {
         let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
         assert!(summary.contains("\"robot\": \"emulator\""), "{summary}");
         // The emulator's own count of the servo commands: every command in one lateness bin,
-        // and about one command per control cycle (the loop sends one per cycle it runs).
+        // at most one per control cycle (the loop sends one per cycle it runs; the program sees
+        // fewer when two land within one of its cycles, or when the supervisor stopped the
+        // robot: how many is load-dependent, so not judged here — CI once saw 603 of 1233
+        // cycles in a loaded debug build).
         let json: serde_json::Value = serde_json::from_str(&summary).unwrap();
         let servo = &json["motion"]["robot_servo"];
         let commands = servo["commands"]
@@ -1871,7 +1874,7 @@ mod tests {
         assert_eq!(late, commands, "{servo}");
         let cycles = json["motion"]["control_cycles"].as_u64().unwrap();
         assert!(
-            commands > cycles / 2 && commands <= cycles,
+            commands > 0 && commands <= cycles,
             "{commands} of {cycles}: {}",
             json["motion"]["cycles"]
         );
