@@ -3,10 +3,10 @@
 //! The control thread and (on `--robot emulator`) the emulator's clock must wake within a
 //! fraction of a 2 ms cycle. The log writer works in bursts: it formats what the control
 //! thread recorded and, after each second of trial time, may close and compress a trial.mcap
-//! chunk. It therefore runs at nice [`BACKGROUND_NICE`] ([`Background`]): a smaller share of
-//! CPU against threads of normal priority, so a waking control thread or emulator clock is
-//! preferred to it, while it still keeps up under load (the log ring holds 8 s). Lowering its
-//! own priority needs no privilege.
+//! chunk. It therefore runs at nice [`BACKGROUND_NICE`] ([`lower_this_thread`]): a smaller
+//! share of CPU against threads of normal priority, so a waking control thread or emulator
+//! clock is preferred to it, while it still keeps up under load (the log ring holds 8 s).
+//! Lowering its own priority needs no privilege.
 //!
 //! Not lowered, on measurement (issue 10's note, session 8): the cue cycle. Its gaps in the
 //! control loop's samples (15–25 ms of controller time after each 30 Hz cue tick at speedup
@@ -17,42 +17,18 @@
 /// The nice value of the log-writer thread [-]: 10 (CFS weight 110 against 1024 at nice 0).
 pub(crate) const BACKGROUND_NICE: i32 = 10;
 
-/// The calling thread at nice [`BACKGROUND_NICE`] for as long as the value lives (never
-/// raised if it is already lower in priority); dropping it gives the thread its nice value
-/// back where the process may (raising priority needs `CAP_SYS_NICE`). Meant for a spawned
-/// thread that ends with its background work, since threads it spawns would inherit the
-/// value.
-#[derive(Debug)]
-pub(crate) struct Background {
-    /// The nice value before, if it was changed.
-    before: Option<i32>,
-}
-
-impl Background {
-    /// Lowers the calling thread's priority; on an error (logged at debug level) it goes on at
-    /// its priority.
-    pub(crate) fn enter() -> Self {
-        let before = match imp::nice() {
-            Some(n) if n < BACKGROUND_NICE => match imp::set_nice(BACKGROUND_NICE) {
-                Ok(()) => Some(n),
-                Err(e) => {
-                    tracing::debug!("thread stays at nice {n}: {e}");
-                    None
-                }
-            },
-            _ => None,
-        };
-        Self { before }
-    }
-}
-
-impl Drop for Background {
-    fn drop(&mut self) {
-        if let Some(n) = self.before
-            && let Err(e) = imp::set_nice(n)
-        {
-            tracing::debug!("thread stays at nice {BACKGROUND_NICE}, not back to {n}: {e}");
+/// Lowers the calling thread to nice [`BACKGROUND_NICE`] (never raising it if it is already
+/// lower in priority), for good: meant for a spawned thread that ends with its background
+/// work (the threads it would spawn inherit the value, and raising it back needs
+/// `CAP_SYS_NICE`). On an error (logged at debug level) the thread goes on at its priority.
+pub(crate) fn lower_this_thread() {
+    match imp::nice() {
+        Some(n) if n < BACKGROUND_NICE => {
+            if let Err(e) = imp::set_nice(BACKGROUND_NICE) {
+                tracing::debug!("thread stays at nice {n}: {e}");
+            }
         }
+        _ => {}
     }
 }
 
@@ -101,18 +77,15 @@ mod imp {
 mod tests {
     use super::*;
 
-    /// A nice value is per thread: inside `Background` a thread has BACKGROUND_NICE, the
-    /// thread that spawned it keeps its own, and leaving gives the thread its value back or
-    /// (without the privilege to raise priority) leaves it at BACKGROUND_NICE.
+    /// A nice value is per thread: a thread that lowers itself has BACKGROUND_NICE, and the
+    /// thread that spawned it keeps its own.
     #[test]
-    fn background_lowers_only_the_calling_thread() {
+    fn lowering_a_thread_changes_only_that_thread() {
         let before = imp::nice().expect("nice value");
-        let (start, inside, end) = std::thread::spawn(|| {
+        let (start, lowered) = std::thread::spawn(|| {
             let start = imp::nice();
-            let bg = Background::enter();
-            let inside = imp::nice();
-            drop(bg);
-            (start, inside, imp::nice())
+            lower_this_thread();
+            (start, imp::nice())
         })
         .join()
         .expect("thread");
@@ -121,8 +94,7 @@ mod tests {
             Some(before),
             "a thread starts at its creator's value"
         );
-        assert_eq!(inside, Some(BACKGROUND_NICE.max(before)));
-        assert!(end == start || end == Some(BACKGROUND_NICE), "{end:?}");
+        assert_eq!(lowered, Some(BACKGROUND_NICE.max(before)));
         assert_eq!(
             imp::nice(),
             Some(before),

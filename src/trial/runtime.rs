@@ -1284,7 +1284,6 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
 /// something to write.
 mod threaded {
     use super::*;
-    use crate::trial::priority::Background;
 
     /// Control-rate records the ring holds [-]: 4 per cycle, ≈ 4 s of the control rate.
     const CONTROL_LOG_RECORDS: usize = 8192;
@@ -1398,7 +1397,7 @@ mod threaded {
     /// [`WRITER_POLL_MS`] (chunk compression and file writes happen here, off the control
     /// thread and off the cue cycle's frames) until `stop`, then once more.
     pub(super) fn log_writer(sink: &Mutex<LogSink<'_>>, stop: &AtomicBool) -> crate::Result<()> {
-        let _background = Background::enter();
+        crate::trial::priority::lower_this_thread();
         loop {
             let last = stop.load(Ordering::Acquire);
             lock_sink(sink).absorb()?;
