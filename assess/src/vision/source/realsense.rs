@@ -954,7 +954,7 @@ mod playback {
             // SAFETY: every handle is ours, non-null and released exactly once; the sensors
             // stop before the callbacks' sender is freed, lists before their owners.
             unsafe {
-                for open in self.open.drain(..) {
+                for open in &self.open {
                     let mut error: *mut sys::rs2_error = std::ptr::null_mut();
                     if open.started {
                         sys::rs2_stop(open.sensor.as_ptr(), &mut error);
@@ -964,8 +964,6 @@ mod playback {
                         sys::rs2_close(open.sensor.as_ptr(), &mut error);
                         let _ = check(error);
                     }
-                    sys::rs2_delete_stream_profiles_list(open.profiles.as_ptr());
-                    sys::rs2_delete_sensor(open.sensor.as_ptr());
                 }
                 // The last sensor's stop makes the playback rewind its reader on its own thread;
                 // wait for that to finish (the status turns to stopped), or the device would be
@@ -983,6 +981,13 @@ mod playback {
                         break;
                     }
                     std::thread::sleep(Duration::from_millis(5));
+                }
+                // Only then are the sensors released: the reader thread may still hand a frame
+                // to a sensor until the playback has stopped (a sensor deleted before that made
+                // the reader thread crash in 1 of about 30 runs under load).
+                for open in self.open.drain(..) {
+                    sys::rs2_delete_stream_profiles_list(open.profiles.as_ptr());
+                    sys::rs2_delete_sensor(open.sensor.as_ptr());
                 }
                 if let Some(sender) = self.sender.take() {
                     drop(Box::from_raw(sender.as_ptr()));
