@@ -983,8 +983,9 @@ mod playback {
                     std::thread::sleep(Duration::from_millis(5));
                 }
                 // Only then are the sensors released: the reader thread may still hand a frame
-                // to a sensor until the playback has stopped (a sensor deleted before that made
-                // the reader thread crash in 1 of about 30 runs under load).
+                // to a sensor until the playback has stopped. With the sensors deleted before
+                // this wait, the reader thread crashed in 2 of 10 parallel and 1 of 30 serial
+                // runs of the .bag tests under load; in this order, 0 of 32 parallel runs.
                 for open in self.open.drain(..) {
                     sys::rs2_delete_stream_profiles_list(open.profiles.as_ptr());
                     sys::rs2_delete_sensor(open.sensor.as_ptr());
