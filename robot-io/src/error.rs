@@ -118,6 +118,14 @@ pub enum RobotIoError {
         /// Why.
         reason: Arc<str>,
     },
+    /// Two threads wrote the same input recipe at the same moment: both of its package
+    /// buffers were being written, and the write was not taken ([`crate::client::RtdeClient::send_inputs`]
+    /// never waits for another writer). One writer per recipe never sees it.
+    #[error("input recipe {index} is being written by another thread; the write was not taken")]
+    InputsContended {
+        /// The input recipe's index [-].
+        index: usize,
+    },
     /// A configuration value is out of range.
     #[error("invalid configuration: {reason}")]
     InvalidConfig {

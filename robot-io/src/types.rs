@@ -161,10 +161,10 @@ pub trait Robot {
     /// # Implementation
     /// Must not allocate, and must not block longer than about one control period (2 ms).
     /// An implementation paced on the robot's own samples may wait for the next sample, at
-    /// most two periods (4 ms); without one it returns the previous state again (same
-    /// `timestamp_s`), so the caller's robot-state staleness check (the supervisor's
-    /// SAF-REQ-009) sees the missed cycle. A link that is known to be down is an error, after
-    /// the same bounded wait.
+    /// most one period, without waiting for another thread; without one it returns the
+    /// previous state again (same `timestamp_s`), so the caller's robot-state staleness check
+    /// (the supervisor's SAF-REQ-009) sees the missed cycle. A link that is known to be down
+    /// is an error, after the same bounded wait.
     fn read_state(&mut self, out: &mut RobotState) -> crate::Result<()>;
 
     /// Send one command; it takes effect on the robot's next cycle.
