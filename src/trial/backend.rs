@@ -9,13 +9,20 @@
 //! timestamp, so skipped cycles show as longer steps).
 //!
 //! # The wait, and link loss
-//! `read_state` never blocks longer than [`SAMPLE_WAIT`], two controller periods (4 ms of wall
-//! time). A controller sends a sample every period, so the wait normally ends within one.
-//! When none arrives in time, `read_state` returns the previous state again (same
+//! `read_state` waits for a newer sample for at most [`SAMPLE_WAIT`], one period of the real
+//! controller (2 ms of wall time; on the emulator at speedup *s* that spans *s* emulated
+//! cycles). It polls the client's non-blocking read and naps [`POLL_NAP`] between polls: no
+//! lock, no tokio timer, no wake from another thread, so nothing the client's tasks do (or
+//! fail to do: a runtime whose workers are stuck) can stretch it. It returns at most one nap's
+//! overshoot and one read after the deadline ([`paced_read`], whose bound
+//! `paced_read_returns_by_the_deadline_and_never_misses_a_sample_that_came_before_it` proves on
+//! a scripted clock; `read_state_returns_while_the_tokio_runtime_is_stuck` shows it on the
+//! real client). A controller sends a sample every period, so the wait normally ends within
+//! one. When none arrives in time, `read_state` returns the previous state again (same
 //! timestamp): the runtime counts a missed cycle and the supervisor's robot-state staleness
 //! check (SAF-REQ-009) stops the robot after 3 of them. While the client knows the link is
-//! down (reconnecting), `read_state` waits the same bounded time and then fails with
-//! `LinkDown`, and `send` fails too (the command is kept for the reconnection; the
+//! down (reconnecting), `read_state` keeps polling for the same bounded time and then fails
+//! with `LinkDown`, and `send` fails too (the command is kept for the reconnection; the
 //! supervisor latches SAF-REQ-012 and stops).
 //!
 //! The [`RtdeRobot`]'s client reconnects by itself (the RTDE set-up again, then the last
@@ -35,12 +42,71 @@ use robot_io::emulator::{Emulator, EmulatorConfig, SimBackend};
 use robot_io::rtde_robot::{RtdeRobot, RtdeRobotConfig};
 use robot_io::script::RegisterMap;
 use robot_io::sim::{SimConfig, SimRobot};
-use robot_io::{JointCommand, Robot, RobotIoError, RobotState, runtime_state};
+use robot_io::{JointCommand, Robot, RobotState, runtime_state};
 
 use super::runtime::TrialRobot;
 
-/// The longest `read_state` waits for a newer sample: two controller periods of wall time.
-pub(crate) const SAMPLE_WAIT: Duration = Duration::from_millis(4);
+/// The longest `read_state` waits for a newer sample: one period of the real controller, in
+/// wall time [s].
+pub(crate) const SAMPLE_WAIT: Duration = Duration::from_millis(2);
+
+/// The nap between two polls of the client while waiting for a sample [s]. The control
+/// thread's timer slack is lowered to match (`priority::tighten_timer_slack`).
+pub(crate) const POLL_NAP: Duration = Duration::from_micros(50);
+
+/// What [`paced_read`] waits on: a clock, a read that never blocks, and a nap.
+pub(crate) trait SampleSource {
+    /// The time now.
+    fn now(&self) -> Instant;
+    /// The newest state, or the previous one again when none is newer; never blocks.
+    fn read(&mut self, out: &mut RobotState) -> robot_io::Result<()>;
+    /// Sleeps for about `d` (an OS sleep may overshoot).
+    fn nap(&mut self, d: Duration);
+}
+
+/// Reads `src` until it gives a state newer than `*last_ts` [s] (returned, and `*last_ts`
+/// advanced) or until `wait` has passed since the call. At the deadline it returns the last
+/// read's result: `Ok` with the previous state again (the caller counts a missed cycle), or
+/// that read's error (the link is down).
+///
+/// Bound: it returns by `wait` + one nap's overshoot + one read after the call, and a sample
+/// that becomes readable before the deadline is always returned (the last read is made at or
+/// after the deadline). Naps are at most [`POLL_NAP`].
+pub(crate) fn paced_read<S: SampleSource>(
+    src: &mut S,
+    last_ts: &mut f64,
+    out: &mut RobotState,
+    wait: Duration,
+) -> robot_io::Result<()> {
+    let deadline = src.now() + wait;
+    loop {
+        let r = src.read(out);
+        if r.is_ok() && out.timestamp_s > *last_ts {
+            *last_ts = out.timestamp_s;
+            return Ok(());
+        }
+        let now = src.now();
+        if now >= deadline {
+            return r;
+        }
+        src.nap(deadline.saturating_duration_since(now).min(POLL_NAP));
+    }
+}
+
+/// The real clock and OS sleep over an [`RtdeRobot`].
+struct RtdeSource<'a>(&'a mut RtdeRobot);
+
+impl SampleSource for RtdeSource<'_> {
+    fn now(&self) -> Instant {
+        Instant::now()
+    }
+    fn read(&mut self, out: &mut RobotState) -> robot_io::Result<()> {
+        self.0.read_state(out)
+    }
+    fn nap(&mut self, d: Duration) {
+        std::thread::sleep(d);
+    }
+}
 
 /// How long set-up (connect, the program starting) waits for one sample.
 const SETUP_SAMPLE_TIMEOUT: Duration = Duration::from_secs(2);
@@ -69,7 +135,6 @@ impl Default for UrPorts {
 /// An [`RtdeRobot`] paced on the controller timestamp (see the module docs).
 pub(crate) struct PacedRtde {
     robot: RtdeRobot,
-    rt: tokio::runtime::Handle,
     last_ts: f64,
     /// The in-process emulator behind it, for its servo statistics (`None`: a real robot).
     emulator: Option<Arc<Emulator>>,
@@ -84,14 +149,9 @@ impl std::fmt::Debug for PacedRtde {
 }
 
 impl PacedRtde {
-    fn new(
-        robot: RtdeRobot,
-        rt: &tokio::runtime::Runtime,
-        emulator: Option<Arc<Emulator>>,
-    ) -> Self {
+    fn new(robot: RtdeRobot, emulator: Option<Arc<Emulator>>) -> Self {
         Self {
             robot,
-            rt: rt.handle().clone(),
             last_ts: f64::NEG_INFINITY,
             emulator,
         }
@@ -103,41 +163,17 @@ impl Robot for PacedRtde {
     /// the next one, at most [`SAMPLE_WAIT`], and then returns the previous state again.
     ///
     /// # Implementation
-    /// Blocks at most [`SAMPLE_WAIT`] (4 ms), on success and on error: normally until the
-    /// next sample, within one controller period. While the link is down, errors with
-    /// `LinkDown` after the same wait (so a loop polling it runs at about the control rate).
+    /// Never allocates, and returns by [`SAMPLE_WAIT`] (2 ms) plus one OS nap's overshoot, on
+    /// success and on error ([`paced_read`]: polling, no lock held by another thread, no
+    /// tokio). While the link is down it errors with `LinkDown` after the same wait (so a
+    /// loop polling it runs at about the control rate).
     fn read_state(&mut self, out: &mut RobotState) -> robot_io::Result<()> {
-        let deadline = Instant::now() + SAMPLE_WAIT;
-        loop {
-            if let Err(e) = self.robot.read_state(out) {
-                std::thread::sleep(deadline.saturating_duration_since(Instant::now()));
-                return Err(e);
-            }
-            if out.timestamp_s > self.last_ts {
-                self.last_ts = out.timestamp_s;
-                return Ok(());
-            }
-            // `out` holds the previous state; wait for the next sample.
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                return Ok(());
-            }
-            let mut next = *out;
-            match self.rt.block_on(self.robot.wait_state(&mut next, left)) {
-                Ok(()) if next.timestamp_s > self.last_ts => {
-                    self.last_ts = next.timestamp_s;
-                    *out = next;
-                    return Ok(());
-                }
-                Ok(()) => {}
-                // No sample in time: the previous state again.
-                Err(RobotIoError::Timeout { .. }) => return Ok(()),
-                Err(e) => {
-                    std::thread::sleep(deadline.saturating_duration_since(Instant::now()));
-                    return Err(e);
-                }
-            }
-        }
+        paced_read(
+            &mut RtdeSource(&mut self.robot),
+            &mut self.last_ts,
+            out,
+            SAMPLE_WAIT,
+        )
     }
 
     fn send(&mut self, cmd: &JointCommand) -> robot_io::Result<()> {
@@ -284,7 +320,7 @@ pub(crate) fn start_emulator(
         Ok::<_, Error>((emu, robot))
     })?;
     let emulator = Arc::new(emulator);
-    let robot = PacedRtde::new(robot, &rt, Some(Arc::clone(&emulator)));
+    let robot = PacedRtde::new(robot, Some(Arc::clone(&emulator)));
     Ok((
         robot,
         RtdeGuard {
@@ -356,6 +392,221 @@ pub(crate) fn connect_ur(
         ports.script,
         RegisterMap::default(),
     ))?;
-    let robot = PacedRtde::new(robot, &rt, None);
+    let robot = PacedRtde::new(robot, None);
     Ok((robot, RtdeGuard { emulator: None, rt }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use std::borrow::Cow;
+
+    /// A scripted controller link on a scripted clock: samples become readable at given
+    /// times, the link is down over given intervals, each read costs time and each nap
+    /// overshoots by a given amount.
+    #[derive(Debug)]
+    struct Script {
+        base: Instant,
+        now: Duration,
+        /// (readable from [µs], controller timestamp [s]), in time order.
+        samples: Vec<(u64, f64)>,
+        /// Link down over [from, to) [µs].
+        down: Vec<(u64, u64)>,
+        read_cost_us: Vec<u64>,
+        overshoot_us: Vec<u64>,
+        reads: usize,
+        naps: Vec<Duration>,
+        /// The state a read gives before any sample of the script (the previous one).
+        previous_ts: f64,
+    }
+
+    impl Script {
+        fn at_us(&self) -> u64 {
+            u64::try_from(self.now.as_micros()).unwrap_or(u64::MAX)
+        }
+    }
+
+    impl SampleSource for Script {
+        fn now(&self) -> Instant {
+            self.base + self.now
+        }
+        fn read(&mut self, out: &mut RobotState) -> robot_io::Result<()> {
+            let t = self.at_us();
+            let cost = self.read_cost_us[self.reads % self.read_cost_us.len()];
+            self.reads += 1;
+            self.now += Duration::from_micros(cost);
+            if self.down.iter().any(|&(a, b)| (a..b).contains(&t)) {
+                return Err(robot_io::RobotIoError::LinkDown {
+                    reason: Cow::Borrowed("scripted"),
+                });
+            }
+            out.timestamp_s = self
+                .samples
+                .iter()
+                .take_while(|(from, _)| *from <= t)
+                .last()
+                .map_or(self.previous_ts, |&(_, ts)| ts);
+            Ok(())
+        }
+        fn nap(&mut self, d: Duration) {
+            self.naps.push(d);
+            let over = self.overshoot_us[self.naps.len() % self.overshoot_us.len()];
+            self.now += d + Duration::from_micros(over);
+        }
+    }
+
+    fn script() -> impl Strategy<Value = Script> {
+        (
+            proptest::collection::vec(0u64..5_000, 0..6),
+            proptest::collection::vec((0u64..5_000, 0u64..3_000), 0..3),
+            proptest::collection::vec(0u64..80, 1..8),
+            proptest::collection::vec(0u64..400, 1..8),
+        )
+            .prop_map(|(mut at, down, read_cost_us, overshoot_us)| {
+                at.sort_unstable();
+                Script {
+                    base: Instant::now(),
+                    now: Duration::ZERO,
+                    samples: at
+                        .into_iter()
+                        .enumerate()
+                        .map(|(i, t)| (t, 1.0 + 0.002 * i as f64))
+                        .collect(),
+                    down: down.into_iter().map(|(a, len)| (a, a + len)).collect(),
+                    read_cost_us,
+                    overshoot_us,
+                    reads: 0,
+                    naps: Vec::new(),
+                    previous_ts: 1.0 - 0.002,
+                }
+            })
+    }
+
+    proptest! {
+        /// The wait's bound (issue 10: the control cycle never blocks longer than one
+        /// cycle): `paced_read` returns by the deadline + one nap's overshoot + one read,
+        /// never naps longer than POLL_NAP, returns a sample that was readable (link up)
+        /// at the deadline, and otherwise returns only once the whole wait has passed.
+        #[test]
+        fn paced_read_returns_by_the_deadline_and_never_misses_a_sample_that_came_before_it(
+            mut s in script(),
+        ) {
+            let wait = SAMPLE_WAIT;
+            let wait_us = u64::try_from(wait.as_micros()).unwrap();
+            let mut last_ts = s.previous_ts;
+            let mut out = RobotState { timestamp_s: s.previous_ts, ..RobotState::default() };
+            let r = paced_read(&mut s, &mut last_ts, &mut out, wait);
+            let elapsed = s.now;
+            let max_over = *s.overshoot_us.iter().max().unwrap();
+            let max_cost = *s.read_cost_us.iter().max().unwrap();
+            prop_assert!(elapsed <= wait + Duration::from_micros(max_over + max_cost),
+                "returned after {elapsed:?}");
+            prop_assert!(s.naps.iter().all(|n| *n <= POLL_NAP));
+            let fresh = r.is_ok() && out.timestamp_s > s.previous_ts;
+            if fresh {
+                prop_assert_eq!(last_ts, out.timestamp_s);
+            } else {
+                prop_assert_eq!(last_ts, s.previous_ts);
+                prop_assert!(elapsed >= wait, "gave up after {elapsed:?}");
+                // Nothing was readable at the deadline: no sample by then, or the link down.
+                let came = s.samples.first().is_some_and(|(t, _)| *t <= wait_us);
+                let down_at_end = s.down.iter().any(|&(a, b)| a < b && b > wait_us);
+                prop_assert!(!came || down_at_end || r.is_err(),
+                    "a sample readable before the deadline was not returned: {r:?}");
+            }
+            if r.is_err() {
+                prop_assert!(elapsed >= wait, "an error came early, after {elapsed:?}");
+            }
+        }
+    }
+
+    /// Worked example: samples 2 ms apart arrive at 0.3 ms and 2.3 ms; one read costs 10 µs,
+    /// naps overshoot 20 µs. The first call polls until 0.3 ms and returns that sample; the
+    /// second polls on until the 2.3 ms one; a third, with none to come, returns the previous
+    /// state again at 2.31 + 2 ms + at most one overshoot and one read.
+    #[test]
+    fn paced_read_worked_example() {
+        let mut s = Script {
+            base: Instant::now(),
+            now: Duration::ZERO,
+            samples: vec![(300, 1.000), (2_300, 1.002)],
+            down: vec![],
+            read_cost_us: vec![10],
+            overshoot_us: vec![20],
+            reads: 0,
+            naps: Vec::new(),
+            previous_ts: 0.998,
+        };
+        let mut last = 0.998;
+        let mut out = RobotState::default();
+        paced_read(&mut s, &mut last, &mut out, SAMPLE_WAIT).unwrap();
+        assert_eq!(out.timestamp_s, 1.000);
+        // Reads at 0, 80, 160, 240, 320 µs (10 µs read + 50 µs nap + 20 µs overshoot).
+        assert_eq!(s.now, Duration::from_micros(330));
+        paced_read(&mut s, &mut last, &mut out, SAMPLE_WAIT).unwrap();
+        assert_eq!(out.timestamp_s, 1.002);
+        let t2 = s.now;
+        assert!(t2 >= Duration::from_micros(2_310) && t2 <= Duration::from_micros(2_390));
+        paced_read(&mut s, &mut last, &mut out, SAMPLE_WAIT).unwrap();
+        assert_eq!(out.timestamp_s, 1.002, "the previous state again");
+        assert!(s.now >= t2 + SAMPLE_WAIT);
+        assert!(s.now <= t2 + SAMPLE_WAIT + Duration::from_micros(30));
+    }
+
+    /// The real client behind `read_state`, with the tokio runtime that runs the client's
+    /// reader and writer tasks stuck (both workers blocked, as when the OS does not run
+    /// them): `read_state` still returns, with the previous state, each time. The channel's
+    /// 30 s timeout only detects a hang (the old `block_on(wait_state)` waited on a tokio
+    /// timer that a stuck runtime never fires); it is not a speed check.
+    #[test]
+    fn read_state_returns_while_the_tokio_runtime_is_stuck() {
+        let home = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0];
+        let (mut robot, guard) = start_emulator(home, 1).expect("emulator");
+        let mut s = RobotState::default();
+        robot.read_state(&mut s).expect("a first state");
+        let before = s.timestamp_s;
+        // Block both workers of the runtime.
+        let (release_tx, release_rx) = std::sync::mpsc::channel::<()>();
+        let release_rx = Arc::new(std::sync::Mutex::new(release_rx));
+        let (running_tx, running_rx) = std::sync::mpsc::channel();
+        for _ in 0..2 {
+            let (rx, running) = (Arc::clone(&release_rx), running_tx.clone());
+            guard.rt.spawn(async move {
+                running.send(()).expect("test alive");
+                let _ = rx.lock().map(|r| r.recv());
+            });
+        }
+        // The second task can hold the receiver's lock only after the first released it,
+        // so it blocks on the lock: either way both workers are blocked.
+        for _ in 0..2 {
+            running_rx
+                .recv_timeout(Duration::from_secs(30))
+                .expect("a blocking task started");
+        }
+        let (tx, rx) = std::sync::mpsc::channel();
+        let reader = std::thread::spawn(move || {
+            let mut s = RobotState::default();
+            for _ in 0..20 {
+                let r = robot.read_state(&mut s).map(|()| s.timestamp_s);
+                tx.send(r.map_err(|e| e.to_string())).expect("test alive");
+            }
+            robot
+        });
+        let mut last = before;
+        for i in 0..20 {
+            let r = rx
+                .recv_timeout(Duration::from_secs(30))
+                .unwrap_or_else(|_| panic!("read_state hung on call {i} with the runtime stuck"));
+            // At most the samples the reader task had queued before it stopped; then the
+            // previous state again.
+            last = r.expect("the link is not down, only its tasks are stuck");
+        }
+        let stale_at_end = last;
+        drop(release_tx);
+        let robot = reader.join().expect("reader");
+        drop(robot);
+        assert!(stale_at_end >= before);
+        guard.close();
+    }
 }

@@ -9,10 +9,10 @@
 //! (`the_control_cycle_allocates_nothing_on_the_simulated_robot`,
 //! `the_control_cycle_allocates_nothing_over_rtde_to_the_emulator`) prove it with a counting
 //! allocator over whole handovers, the runtime's per-cycle handover scheduling included.
-//! Waiting: `read` on the simulated robot never waits; on RTDE (`backend::PacedRtde`) it waits
-//! for the next controller sample, at most two controller periods — longer than one cycle, so
-//! the "never blocks longer than one cycle" point of issue 10 is not met yet, and no test claims
-//! it. The supervisor's send is the RTDE client's non-blocking register write.
+//! Waiting: `read` on the simulated robot never waits; on RTDE (`backend::PacedRtde`) it polls
+//! for the next controller sample for at most one controller period (2 ms), waiting for no
+//! other thread (`backend::paced_read` and its tests). The supervisor's send is the RTDE
+//! client's register write, which takes no lock the client's tasks hold.
 //!
 //! On an RTDE robot the cycle runs on its own thread and logs into a [`super::log::ControlLog`]
 //! (see the runtime's module docs); on the mock clock it logs straight into the trial log.

@@ -1,4 +1,4 @@
-//! Scheduling priority of the log-writer thread.
+//! Scheduling priority of the log-writer thread, and the control thread's timer slack.
 //!
 //! The control thread and (on `--robot emulator`) the emulator's clock must wake within a
 //! fraction of a 2 ms cycle. The log writer works in bursts: it formats what the control
@@ -13,6 +13,22 @@
 //! 4) went away with the cue cycle at `SCHED_IDLE`, but at nice 10 already a debug build at
 //! speedup 10 starved it: the trial's mean time scale fell to 0.09 and the emulator trial test
 //! failed. The assessment is part of the trial, not a background job.
+//!
+//! The control thread waits for a controller sample by napping `backend::POLL_NAP` (50 µs)
+//! between polls. Linux lets a sleep run late by the thread's *timer slack* (50 µs by
+//! default), which would double each nap; [`tighten_timer_slack`] lowers it to
+//! [`CONTROL_TIMER_SLACK_NS`] for that thread.
+
+/// The control thread's timer slack [ns]: 10 µs.
+pub(crate) const CONTROL_TIMER_SLACK_NS: u64 = 10_000;
+
+/// Lowers the calling thread's timer slack to [`CONTROL_TIMER_SLACK_NS`] (no privilege
+/// needed). On an error (logged at debug level) the thread keeps its slack.
+pub(crate) fn tighten_timer_slack() {
+    if let Err(e) = imp::set_timer_slack_ns(CONTROL_TIMER_SLACK_NS) {
+        tracing::debug!("the control thread keeps its timer slack: {e}");
+    }
+}
 
 /// The nice value of the log-writer thread [-]: 10 (CFS weight 110 against 1024 at nice 0).
 pub(crate) const BACKGROUND_NICE: i32 = 10;
@@ -50,6 +66,25 @@ mod imp {
         }
     }
 
+    /// Sets the calling thread's timer slack [ns].
+    pub(super) fn set_timer_slack_ns(ns: u64) -> std::io::Result<()> {
+        let ns = libc::c_ulong::try_from(ns).map_err(std::io::Error::other)?;
+        // SAFETY: PR_SET_TIMERSLACK takes one integer argument; no memory is touched.
+        if unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, ns, 0, 0, 0) } == 0 {
+            Ok(())
+        } else {
+            Err(std::io::Error::last_os_error())
+        }
+    }
+
+    /// The calling thread's timer slack [ns] (`None` on an error).
+    #[cfg(test)]
+    pub(super) fn timer_slack_ns() -> Option<u64> {
+        // SAFETY: PR_GET_TIMERSLACK takes no argument and returns the slack.
+        let r = unsafe { libc::prctl(libc::PR_GET_TIMERSLACK, 0, 0, 0, 0) };
+        u64::try_from(r).ok()
+    }
+
     /// Sets the calling thread's nice value (on Linux a nice value belongs to one thread).
     pub(super) fn set_nice(n: i32) -> std::io::Result<()> {
         // SAFETY: plain integers; no memory of ours is touched.
@@ -61,9 +96,13 @@ mod imp {
     }
 }
 
-/// Elsewhere threads keep their priority.
+/// Elsewhere threads keep their priority and timer slack.
 #[cfg(not(target_os = "linux"))]
 mod imp {
+    pub(super) fn set_timer_slack_ns(_ns: u64) -> std::io::Result<()> {
+        Ok(())
+    }
+
     pub(super) fn nice() -> Option<i32> {
         None
     }
@@ -100,5 +139,20 @@ mod tests {
             Some(before),
             "the spawning thread is unchanged"
         );
+    }
+
+    /// The timer slack is per thread too: a thread that tightens it has
+    /// CONTROL_TIMER_SLACK_NS, and the thread that spawned it keeps its own.
+    #[test]
+    fn tightening_the_timer_slack_changes_only_that_thread() {
+        let before = imp::timer_slack_ns().expect("timer slack");
+        let tightened = std::thread::spawn(|| {
+            tighten_timer_slack();
+            imp::timer_slack_ns()
+        })
+        .join()
+        .expect("thread");
+        assert_eq!(tightened, Some(CONTROL_TIMER_SLACK_NS));
+        assert_eq!(imp::timer_slack_ns(), Some(before));
     }
 }

@@ -13,7 +13,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_hrc-adapt");
+mod common;
+use common::{BIN, run_folder, summary};
+
 /// Every wait of these tests is bounded by this.
 const DEADLINE: Duration = Duration::from_secs(120);
 
@@ -81,38 +83,18 @@ impl Drop for Emulate {
     }
 }
 
-/// The shipped trial config with absolute paths, a 6 s L1 trial whose first fetch starts at
-/// once, and `[link] resume = resume`.
-fn trial_config(dir: &Path, resume: bool) -> PathBuf {
-    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
-    let mut text = std::fs::read_to_string(config.join("trial.toml")).unwrap();
-    for file in [
-        "example-workspace.toml",
-        "handover.toml",
-        "policy-adaptive.toml",
-        "assess.toml",
-    ] {
-        let abs = config.join(file);
-        text = text.replace(
-            &format!("\"{file}\""),
-            &format!("{:?}", abs.display().to_string()),
-        );
-    }
-    let set = |text: String, key: &str, value: &str| -> String {
-        let line = text
-            .lines()
-            .find(|l| l.starts_with(&format!("{key} = ")))
-            .unwrap_or_else(|| panic!("{key} in config/trial.toml"))
-            .to_owned();
-        text.replace(&line, &format!("{key} = {value}"))
-    };
-    text = set(text, "max_duration_s", "6.0");
-    text = set(text, "lead_time_s", "60.0");
-    text = set(text, "resume", if resume { "true" } else { "false" });
-    text = set(text, "resume_within_s", "30.0");
-    let path = dir.join("trial.toml");
-    std::fs::write(&path, text).unwrap();
-    path
+/// The trial config of these tests: a 6 s L1 trial whose first fetch starts at once, and
+/// `[link] resume = resume`.
+fn link_config(dir: &Path, resume: bool) -> PathBuf {
+    common::trial_config(
+        dir,
+        &[
+            ("max_duration_s", "6.0"),
+            ("lead_time_s", "60.0"),
+            ("resume", if resume { "true" } else { "false" }),
+            ("resume_within_s", "30.0"),
+        ],
+    )
 }
 
 /// A running `hrc-adapt trial` on the emulator process.
@@ -128,7 +110,7 @@ impl Trial {
             .args(["trial", "--robot", "127.0.0.1", "--condition", "L1"])
             .args(["--participant", "P01", "--seed", "1"])
             .arg("--config")
-            .arg(trial_config(dir, resume))
+            .arg(link_config(dir, resume))
             .arg("--out-root")
             .arg(&out_root)
             .args(["--rtde-port", &emu.rtde.to_string()])
@@ -176,56 +158,9 @@ impl Trial {
     }
 
     /// Waits for the trial's end: its exit status, its stdout and its stderr.
-    fn wait(mut self) -> (ExitStatus, String, String) {
-        let start = Instant::now();
-        let mut stdout = self.child.stdout.take().unwrap();
-        let mut stderr = self.child.stderr.take().unwrap();
-        let out = std::thread::spawn(move || {
-            let mut s = String::new();
-            let _ = stdout.read_to_string(&mut s);
-            s
-        });
-        let err = std::thread::spawn(move || {
-            let mut s = String::new();
-            let _ = stderr.read_to_string(&mut s);
-            s
-        });
-        let status = loop {
-            if let Some(status) = self.child.try_wait().unwrap() {
-                break status;
-            }
-            if start.elapsed() > DEADLINE {
-                let _ = self.child.kill();
-                panic!("the trial did not end");
-            }
-            std::thread::sleep(Duration::from_millis(50));
-        };
-        (status, out.join().unwrap(), err.join().unwrap())
+    fn wait(self) -> (ExitStatus, String, String) {
+        common::wait(self.child)
     }
-}
-
-/// The run folder the trial printed (the last line on stdout), with every file finished.
-fn run_folder(stdout: &str, stderr: &str) -> PathBuf {
-    let dir = PathBuf::from(
-        stdout
-            .lines()
-            .last()
-            .unwrap_or_else(|| panic!("no run folder printed; stderr: {stderr}")),
-    );
-    for f in [
-        "trial.mcap",
-        "indicators.csv",
-        "robot.csv",
-        "summary.json",
-        "report.html",
-    ] {
-        assert!(dir.join(f).is_file(), "{f} missing in {}", dir.display());
-    }
-    dir
-}
-
-fn summary(dir: &Path) -> serde_json::Value {
-    serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap()
 }
 
 /// The `event` names on `/task/events`.

@@ -1,0 +1,114 @@
+//! What the tests of the `hrc-adapt` binary share: a trial config with absolute paths and
+//! chosen keys, running the binary to its end, and the run folder it prints.
+
+#![allow(dead_code)] // each test binary uses its own part
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+/// The binary under test.
+pub(crate) const BIN: &str = env!("CARGO_BIN_EXE_hrc-adapt");
+/// Every wait of these tests is bounded by this (a hang detector, not a speed check).
+pub(crate) const DEADLINE: Duration = Duration::from_secs(900);
+
+/// The shipped `config/trial.toml` written to `dir/trial.toml` with absolute paths to the
+/// files it names and each `(key, value)` of `set` replacing that key's line.
+pub(crate) fn trial_config(dir: &Path, set: &[(&str, &str)]) -> PathBuf {
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+    let mut text = std::fs::read_to_string(config.join("trial.toml")).unwrap();
+    for file in [
+        "example-workspace.toml",
+        "handover.toml",
+        "policy-adaptive.toml",
+        "assess.toml",
+    ] {
+        let abs = config.join(file);
+        text = text.replace(
+            &format!("\"{file}\""),
+            &format!("{:?}", abs.display().to_string()),
+        );
+    }
+    for (key, value) in set {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with(&format!("{key} = ")))
+            .unwrap_or_else(|| panic!("{key} in config/trial.toml"))
+            .to_owned();
+        text = text.replace(&line, &format!("{key} = {value}"));
+    }
+    let path = dir.join("trial.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Waits for `child` to end (killed after [`DEADLINE`]): its exit status, stdout and stderr
+/// (both piped).
+pub(crate) fn wait(mut child: Child) -> (ExitStatus, String, String) {
+    let start = Instant::now();
+    let mut stdout = child.stdout.take().unwrap();
+    let mut stderr = child.stderr.take().unwrap();
+    let out = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = stdout.read_to_string(&mut s);
+        s
+    });
+    let err = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = stderr.read_to_string(&mut s);
+        s
+    });
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if start.elapsed() > DEADLINE {
+            let _ = child.kill();
+            panic!("the process did not end");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    (status, out.join().unwrap(), err.join().unwrap())
+}
+
+/// Runs `hrc-adapt trial` with `args` to its end and returns its exit status, stdout and
+/// stderr.
+pub(crate) fn trial(args: &[&str]) -> (ExitStatus, String, String) {
+    let child = Command::new(BIN)
+        .arg("trial")
+        .args(args)
+        .env("RUST_LOG", "warn")
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start hrc-adapt trial");
+    wait(child)
+}
+
+/// The run folder the trial printed (the last line on stdout), with every file finished
+/// (ARCHITECTURE.md, "Files a trial leaves").
+pub(crate) fn run_folder(stdout: &str, stderr: &str) -> PathBuf {
+    let dir = PathBuf::from(
+        stdout
+            .lines()
+            .last()
+            .unwrap_or_else(|| panic!("no run folder printed; stderr: {stderr}")),
+    );
+    for f in [
+        "trial.mcap",
+        "indicators.csv",
+        "robot.csv",
+        "summary.json",
+        "report.html",
+    ] {
+        assert!(dir.join(f).is_file(), "{f} missing in {}", dir.display());
+    }
+    dir
+}
+
+/// `summary.json` of a run folder.
+pub(crate) fn summary(dir: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap()
+}
