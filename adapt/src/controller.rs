@@ -788,21 +788,22 @@ impl Controller {
         let (now, elapsed) = match self.last_now_s {
             None => (if now_s.is_finite() { now_s } else { 0.0 }, 1.0),
             Some(last) => {
-                let now = if now_s.is_finite() && now_s > last {
-                    now_s
-                } else {
-                    last + cycle
-                };
-                let n = ((now - last) / cycle).round().max(1.0);
-                (now, n)
+                // At least one cycle on, by the rule the supervisor judges the step by (a
+                // late sample that a cycle already ran for is the next cycle, not this one
+                // again: comparing with `last` itself made that depend on rounding, and the
+                // plan ran a cycle ahead of the supervisor's clock).
+                let now = robot_io::cycle_time_s(last, now_s, cycle);
+                (now, (now - last) / cycle)
             }
         };
         // Every missed cycle is counted, also those beyond the catch-up bound.
-        self.stats.missed_cycles = self.stats.missed_cycles.saturating_add(elapsed as u64 - 1);
-        // The plan advances at most the envelope's catch-up bound (the robot's servo
-        // extrapolation + 1, the longest the supervisor judges a step over): a longer gap delays
-        // the plan, as the robot held its target, instead of making the next target a jump.
-        let elapsed = elapsed.min(f64::from(self.cfg.envelope.catch_up_cycles()));
+        let missed = (elapsed.round() - 1.0).max(0.0) as u64;
+        self.stats.missed_cycles = self.stats.missed_cycles.saturating_add(missed);
+        // The plan advances by the elapsed time, as the supervisor judges it, but at most the
+        // envelope's catch-up bound (the robot's servo extrapolation + 1, the longest the
+        // supervisor judges a step over): a longer gap delays the plan, as the robot held its
+        // target, instead of making the next target a jump.
+        let elapsed = elapsed.clamp(1.0, f64::from(self.cfg.envelope.catch_up_cycles()));
         self.last_now_s = Some(now);
         self.stats.steps = self.stats.steps.saturating_add(1);
         self.events.clear();

@@ -42,6 +42,7 @@
 //! ```
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::indexing_slicing))]
 
+mod cycle;
 mod error;
 mod types;
 
@@ -77,6 +78,7 @@ pub use replay::ReplayRobot;
 pub use sim::{SimConfig, SimRobot};
 pub use trace::{Trace, TraceReport};
 
+pub use cycle::{CYCLE_TIME_TOLERANCE, cycle_time_s};
 pub use error::{Result, RobotIoError};
 pub use types::{
     JointCommand, Joints, Robot, RobotState, robot_mode, runtime_state, safety_mode,

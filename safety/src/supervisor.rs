@@ -438,7 +438,10 @@ impl<R: Robot> Supervisor<R> {
                 }
                 let (q_from, v_prev, dt, dv_period, ref_ts) = match self.servo_ref {
                     Some(r) => {
-                        let ref_ts = self.state.timestamp_s.max(r.timestamp_s + cycle);
+                        // The controller's clock rule (`robot_io::cycle_time_s`), so the
+                        // period judged is the one the controller advanced its plan by.
+                        let ref_ts =
+                            robot_io::cycle_time_s(r.timestamp_s, self.state.timestamp_s, cycle);
                         let elapsed = ref_ts - r.timestamp_s;
                         let dt = if elapsed.is_finite() {
                             elapsed.clamp(cycle, max_period)

@@ -1104,16 +1104,17 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
                         // A missed sample: this cycle runs on the held state at the predicted
                         // time; the supervisor stops the robot after 3 of them (SAF-REQ-009).
                         prev_t + CYCLE_S
-                    } else if k == 0 || t_robot > prev_t {
+                    } else if k == 0 {
                         t_robot
                     } else if t_robot < prev_t - CLOCK_RESTART_S {
                         // The robot's clock went back (a restarted controller): re-base.
                         t0 = Some(cc.state.timestamp_s - (prev_t + CYCLE_S));
                         prev_t + CYCLE_S
                     } else {
-                        // Behind the predicted time of missed cycles: keep time monotonic
-                        // until the robot's clock catches up.
-                        prev_t + CYCLE_S
+                        // The robot's time, but at least one cycle on (a late sample that a
+                        // held cycle already ran for): the rule of the controller and the
+                        // supervisor, so all three advance by the same time.
+                        robot_io::cycle_time_s(prev_t, t_robot, CYCLE_S)
                     };
                     if t >= cfg.max_duration_s {
                         break;

@@ -101,6 +101,9 @@ struct Loop {
     script: Hand,
     /// Robot cycles per controller step (1: every cycle; 3: two missed cycles per step).
     period: usize,
+    /// Every this many steps, a late sample: one step on the held state, the next on the late
+    /// sample (its time a hair late by rounding), the one after it on a sample two cycles on.
+    hiccup_every: Option<usize>,
     state: RobotState,
     cmd: JointCommand,
     hand: [f64; 3],
@@ -137,6 +140,7 @@ impl Loop {
             ctl,
             script,
             period,
+            hiccup_every: None,
             state: RobotState::default(),
             cmd: JointCommand::Stop { decel: 1.0 },
             hand: HAND_REST,
@@ -199,14 +203,23 @@ impl Loop {
     /// One controller step: the robot runs `period` cycles, then read → controller →
     /// supervisor → send.
     fn step(&mut self) {
-        if self.steps > 0 {
-            for _ in 0..self.period {
-                self.sim.borrow_mut().step();
-            }
+        // (robot cycles to run, rounding on the sample's time [s])
+        let (robot_cycles, rounding) = match self.hiccup_every.map(|n| self.steps % n) {
+            _ if self.steps == 0 => (0, 0.0),
+            // No new sample in time: this step runs on the held state.
+            Some(1) => (0, 0.0),
+            // The late sample, as the runtime's `timestamp − t0` can give it: 1e-13 s late.
+            Some(2) => (1, 1e-13),
+            // Caught up: the newest sample is two cycles on.
+            Some(3) => (2, 0.0),
+            _ => (self.period, 0.0),
+        };
+        for _ in 0..robot_cycles {
+            self.sim.borrow_mut().step();
         }
         self.steps += 1;
         self.sup.read_state(&mut self.state).unwrap();
-        let now = self.state.timestamp_s;
+        let now = self.state.timestamp_s + rounding;
         self.script_hand(now, DT * self.period as f64);
         let before = self.ctl.phase();
         let body = self.body();
@@ -612,6 +625,33 @@ fn missed_cycles_cause_no_saf_req_003_004_005() {
         run.phases,
         run.ctl.stats()
     );
+}
+
+#[test]
+fn saf_req_004_a_late_sample_after_a_held_cycle_is_judged_over_the_time_the_plan_advanced() {
+    // A sample that arrives late (the cycle that expected it ran on the held state), then a
+    // skip: the controller and the supervisor must advance by the same time. When the
+    // controller took a late sample a hair after its last step as "now", its plan ran one cycle
+    // ahead of the supervisor's clock, and the next skip implied double the speed: SAF-REQ-004
+    // reductions on the emulator at `--speedup 4`, every time a missed cycle followed a late
+    // sample (`robot_io::cycle_time_s` is now the rule of both).
+    let mut run = Loop::new(Hand::ReachWhenPresented, 1, false);
+    run.hiccup_every = Some(7);
+    run.run_until_done(40.0);
+    let held = run
+        .cycles
+        .windows(2)
+        .filter(|w| w[1].state.timestamp_s == w[0].state.timestamp_s)
+        .count();
+    assert!(held > 100, "{held} steps on a held state in {}", run.steps);
+    for r in [
+        Requirement::Saf003JointSpeed,
+        Requirement::Saf004JointAcceleration,
+        Requirement::Saf005TcpSpeed,
+    ] {
+        assert_eq!(run.count(r), 0, "{} in {} steps", r.id(), run.steps);
+    }
+    assert!(!run.ctl.incomplete());
 }
 
 #[test]
