@@ -9,10 +9,10 @@
 //! timestamp, so skipped cycles show as longer steps).
 //!
 //! # The wait, and link loss
-//! `read_state` waits for a newer sample for at most [`SAMPLE_WAIT`], one period of the real
-//! controller (2 ms of wall time; on the emulator at speedup *s* that spans *s* emulated
-//! cycles). It polls the client's non-blocking read and naps [`POLL_NAP`] between polls: no
-//! lock, no tokio timer, no wake from another thread, so nothing the client's tasks do (or
+//! `read_state` waits for a newer sample until it is one period overdue, and at least
+//! [`SAMPLE_WAIT`], one period of the real controller (2 ms of wall time; on the emulator at
+//! speedup *s* that spans *s* emulated cycles): at most 4 ms ([`sample_wait`]). It polls the
+//! client's non-blocking read and naps [`POLL_NAP`] between polls: no lock, no tokio timer, no wake from another thread, so nothing the client's tasks do (or
 //! fail to do: a runtime whose workers are stuck) can stretch it. It returns at most one nap's
 //! overshoot and one read after the deadline ([`paced_read`], whose bound
 //! `paced_read_returns_by_the_deadline_and_never_misses_a_sample_that_came_before_it` proves on
@@ -46,9 +46,33 @@ use robot_io::{JointCommand, Robot, RobotState, runtime_state};
 
 use super::runtime::TrialRobot;
 
-/// The longest `read_state` waits for a newer sample: one period of the real controller, in
-/// wall time [s].
+/// How long `read_state` waits for a newer sample at least: one period of the real
+/// controller, in wall time [s] (see [`sample_wait`] for when it waits longer).
 pub(crate) const SAMPLE_WAIT: Duration = Duration::from_millis(2);
+
+/// The wall-clock period of a real controller's samples [s].
+pub(crate) const UR_PERIOD: Duration = Duration::from_millis(2);
+
+/// How long a `read_state` called at `call` waits for the next sample, when the previous one
+/// was read at `last_fresh` and samples come every `period` (wall time): until the next
+/// sample is one whole period overdue (`last_fresh + 2·period`), but at least
+/// [`SAMPLE_WAIT`] after the call.
+///
+/// Measured from the call alone, a wait of one period ended just before a sample that came a
+/// little late: at speedup 1 the emulator's samples (a tokio timer of 1 ms resolution) missed
+/// a 2 ms wait so often that 40 % of the cycles ran on a held state and a quarter of the
+/// executed-jerk samples were over the bound. Bound: at most `max(SAMPLE_WAIT, 2·period)`
+/// after the call, i.e. two periods of the real controller (4 ms) at most.
+pub(crate) fn sample_wait(
+    call: Instant,
+    last_fresh: Option<Instant>,
+    period: Duration,
+) -> Duration {
+    let overdue = last_fresh
+        .and_then(|t| t.checked_add(period.saturating_mul(2)))
+        .map_or(Duration::ZERO, |d| d.saturating_duration_since(call));
+    overdue.max(SAMPLE_WAIT)
+}
 
 /// The nap between two polls of the client while waiting for a sample [s]. The control
 /// thread's timer slack is lowered to match (`priority::tighten_timer_slack`).
@@ -136,6 +160,10 @@ impl Default for UrPorts {
 pub(crate) struct PacedRtde {
     robot: RtdeRobot,
     last_ts: f64,
+    /// When the last newer sample was read (`None` before the first).
+    last_fresh: Option<Instant>,
+    /// The wall-clock period of the robot's samples: 2 ms, or 2 ms / speedup on the emulator.
+    period: Duration,
     /// The in-process emulator behind it, for its servo statistics (`None`: a real robot).
     emulator: Option<Arc<Emulator>>,
 }
@@ -149,10 +177,12 @@ impl std::fmt::Debug for PacedRtde {
 }
 
 impl PacedRtde {
-    fn new(robot: RtdeRobot, emulator: Option<Arc<Emulator>>) -> Self {
+    fn new(robot: RtdeRobot, emulator: Option<Arc<Emulator>>, period: Duration) -> Self {
         Self {
             robot,
             last_ts: f64::NEG_INFINITY,
+            last_fresh: None,
+            period,
             emulator,
         }
     }
@@ -160,20 +190,28 @@ impl PacedRtde {
 
 impl Robot for PacedRtde {
     /// The newest sample if its timestamp is newer than the last one returned; else waits for
-    /// the next one, at most [`SAMPLE_WAIT`], and then returns the previous state again.
+    /// the next one until it is a period overdue ([`sample_wait`]), and then returns the
+    /// previous state again.
     ///
     /// # Implementation
-    /// Never allocates, and returns by [`SAMPLE_WAIT`] (2 ms) plus one OS nap's overshoot, on
-    /// success and on error ([`paced_read`]: polling, no lock held by another thread, no
-    /// tokio). While the link is down it errors with `LinkDown` after the same wait (so a
-    /// loop polling it runs at about the control rate).
+    /// Never allocates, and returns by [`sample_wait`]'s wait (at most 4 ms) plus one OS nap's
+    /// overshoot, on success and on error ([`paced_read`]: polling, no lock held by another
+    /// thread, no tokio). While the link is down it errors with `LinkDown` after the same wait
+    /// (so a loop polling it runs at about the control rate).
     fn read_state(&mut self, out: &mut RobotState) -> robot_io::Result<()> {
-        paced_read(
+        let call = Instant::now();
+        let wait = sample_wait(call, self.last_fresh, self.period);
+        let before = self.last_ts;
+        let r = paced_read(
             &mut RtdeSource(&mut self.robot),
             &mut self.last_ts,
             out,
-            SAMPLE_WAIT,
-        )
+            wait,
+        );
+        if self.last_ts > before {
+            self.last_fresh = Some(Instant::now());
+        }
+        r
     }
 
     fn send(&mut self, cmd: &JointCommand) -> robot_io::Result<()> {
@@ -320,7 +358,11 @@ pub(crate) fn start_emulator(
         Ok::<_, Error>((emu, robot))
     })?;
     let emulator = Arc::new(emulator);
-    let robot = PacedRtde::new(robot, Some(Arc::clone(&emulator)));
+    let robot = PacedRtde::new(
+        robot,
+        Some(Arc::clone(&emulator)),
+        UR_PERIOD / speedup.max(1),
+    );
     Ok((
         robot,
         RtdeGuard {
@@ -392,7 +434,7 @@ pub(crate) fn connect_ur(
         ports.script,
         RegisterMap::default(),
     ))?;
-    let robot = PacedRtde::new(robot, None);
+    let robot = PacedRtde::new(robot, None, UR_PERIOD);
     Ok((robot, RtdeGuard { emulator: None, rt }))
 }
 
@@ -518,6 +560,44 @@ mod tests {
             if r.is_err() {
                 prop_assert!(elapsed >= wait, "an error came early, after {elapsed:?}");
             }
+        }
+    }
+
+    /// Worked example, by hand: samples every 2 ms (speedup 1), the last read at 10.0 ms.
+    /// Called at 10.2 ms, it waits until 14.0 ms (3.8 ms: the next sample is due at 12.0 ms
+    /// and a period overdue at 14.0); called at 13.5 ms, the 2 ms floor (until 15.5 ms). At
+    /// speedup 4 (0.5 ms) the overdue point is 11.0 ms: the floor again. Before any sample:
+    /// the floor.
+    #[test]
+    fn sample_wait_worked_example() {
+        let t0 = Instant::now();
+        let ms = |x: f64| t0 + Duration::from_secs_f64(x * 1e-3);
+        let p1 = UR_PERIOD;
+        let p4 = UR_PERIOD / 4;
+        let close = |a: Duration, b: f64| (a.as_secs_f64() - b * 1e-3).abs() < 1e-9;
+        assert!(close(sample_wait(ms(10.2), Some(ms(10.0)), p1), 3.8));
+        assert!(close(sample_wait(ms(13.5), Some(ms(10.0)), p1), 2.0));
+        assert!(close(sample_wait(ms(10.2), Some(ms(10.0)), p4), 2.0));
+        assert_eq!(sample_wait(ms(10.2), None, p1), SAMPLE_WAIT);
+    }
+
+    proptest! {
+        /// The wait ends no earlier than SAMPLE_WAIT after the call and no later than the
+        /// later of that and two periods after the last sample: never more than 4 ms on a
+        /// real controller's period.
+        #[test]
+        fn sample_wait_is_bounded(
+            since_us in 0u64..20_000,
+            period_us in 100u64..=2_000,
+        ) {
+            let last = Instant::now();
+            let call = last + Duration::from_micros(since_us);
+            let period = Duration::from_micros(period_us);
+            let w = sample_wait(call, Some(last), period);
+            prop_assert!(w >= SAMPLE_WAIT);
+            prop_assert!(w <= SAMPLE_WAIT.max(2 * period));
+            prop_assert!(w <= Duration::from_millis(4));
+            prop_assert!(call + w >= last + 2 * period || w == SAMPLE_WAIT);
         }
     }
 
