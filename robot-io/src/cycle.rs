@@ -1,7 +1,7 @@
 //! The time a control cycle stands for, one rule for every component that runs on the cycle.
 //!
-//! The trial runtime, the controller (`adapt::controller::Controller::step`) and the supervisor each
-//! keep a clock of control cycles, taken from the robot's timestamps. When a sample comes late
+//! The trial runtime, the controller (`adapt::controller::Controller::step`) and the supervisor
+//! each keep a clock of control cycles, taken from the robot's timestamps. When a sample comes late
 //! (after the cycle that expected it ran on the held state) or the loop skips samples (missed
 //! cycles), all three must agree on how far each cycle advanced: the controller advances its
 //! plan by that time and the supervisor judges the implied speed and acceleration over it. A

@@ -12,8 +12,9 @@
 //! `read_state` waits for a newer sample until it is one period overdue, and at least
 //! [`SAMPLE_WAIT`], one period of the real controller (2 ms of wall time; on the emulator at
 //! speedup *s* that spans *s* emulated cycles): at most 4 ms ([`sample_wait`]). It polls the
-//! client's non-blocking read and naps [`POLL_NAP`] between polls: no lock, no tokio timer, no wake from another thread, so nothing the client's tasks do (or
-//! fail to do: a runtime whose workers are stuck) can stretch it. It returns at most one nap's
+//! client's non-blocking read and naps [`POLL_NAP`] between polls: no lock, no tokio timer, no
+//! wake from another thread, so nothing the client's tasks do (or fail to do: a runtime whose
+//! workers are stuck) can stretch it. It returns at most one nap's
 //! overshoot and one read after the deadline ([`paced_read`], whose bound
 //! `paced_read_returns_by_the_deadline_and_never_misses_a_sample_that_came_before_it` proves on
 //! a scripted clock; `read_state_returns_while_the_tokio_runtime_is_stuck` shows it on the
@@ -60,9 +61,10 @@ pub(crate) const UR_PERIOD: Duration = Duration::from_millis(2);
 ///
 /// Measured from the call alone, a wait of one period ended just before a sample that came a
 /// little late: at speedup 1 the emulator's samples (a tokio timer of 1 ms resolution) missed
-/// a 2 ms wait so often that 40 % of the cycles ran on a held state and a quarter of the
-/// executed-jerk samples were over the bound. Bound: at most `max(SAMPLE_WAIT, 2·period)`
-/// after the call, i.e. two periods of the real controller (4 ms) at most.
+/// a 2 ms wait so often that 35–39 % of the cycles ran on a held state and 23–26 % of the
+/// executed-jerk samples were over the bound (BENCHMARKS.md, session 10). Bound: at most
+/// `max(SAMPLE_WAIT, 2·period)` after the call, i.e. two periods of the real controller (4 ms)
+/// at most.
 pub(crate) fn sample_wait(
     call: Instant,
     last_fresh: Option<Instant>,
