@@ -72,17 +72,19 @@ pub struct EmulateArgs {
     /// 2 ms / N of wall time, so far beyond 100 the emulator cannot keep up.
     #[arg(long, default_value_t = 1, value_parser = crate::trial::speedup_parser())]
     speedup: u32,
+    /// SCHED_FIFO priority of the emulator's clock thread, as a controller's real-time clock
+    /// (0 = normal scheduling), 0..=99. Refused by the OS (no CAP_SYS_NICE or RLIMIT_RTPRIO),
+    /// it runs at normal priority and a warning says so.
+    #[arg(long, default_value_t = 95, value_parser = clap::value_parser!(u8).range(0..=99))]
+    clock_priority: u8,
+    /// SCHED_FIFO priority of the threads that serve RTDE, dashboard and script clients
+    /// (0 = normal scheduling), 0..=99; refused, as --clock-priority.
+    #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u8).range(0..=99))]
+    io_priority: u8,
 }
 
 fn runtime() -> crate::Result<tokio::runtime::Runtime> {
-    tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .map_err(|source| Error::Thread {
-            name: "tokio runtime",
-            source,
-        })
+    crate::trial::rtde_runtime(None).map(|(rt, _)| rt)
 }
 
 /// Runs `hrc-adapt record`: records the controller over RTDE into a CSV trace until Ctrl-C.
@@ -200,7 +202,10 @@ async fn record_async(args: RecordArgs) -> crate::Result<()> {
 
 /// Runs `hrc-adapt emulate`: serves the controller emulator until Ctrl-C.
 pub fn emulate(args: EmulateArgs) -> crate::Result<()> {
-    runtime()?.block_on(emulate_async(args))
+    let io = robot_io::realtime::RtPriority::new(args.io_priority).ok();
+    crate::trial::rtde_runtime(io)?
+        .0
+        .block_on(emulate_async(args))
 }
 
 async fn emulate_async(args: EmulateArgs) -> crate::Result<()> {
@@ -211,6 +216,7 @@ async fn emulate_async(args: EmulateArgs) -> crate::Result<()> {
         secondary_port: args.secondary_port,
         realtime_port: args.realtime_port,
         speedup: args.speedup,
+        clock_priority: robot_io::realtime::RtPriority::new(args.clock_priority).ok(),
         ..EmulatorConfig::default()
     };
     let backend: Box<dyn robot_io::EmulatorBackend> = match (&args.trace, args.sim) {

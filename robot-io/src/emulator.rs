@@ -78,6 +78,11 @@ pub struct EmulatorConfig {
     /// Inputs claimed by "another writer" from the start (as fieldbus adapters claim
     /// registers 0–23 on some cells); clients asking for them get `IN_USE`.
     pub preclaimed_inputs: Vec<String>,
+    /// Run the clock on its own thread under `SCHED_FIFO` at this priority, as a controller's
+    /// real-time clock ([`crate::realtime`]; `None`: normal scheduling, and at speedups below
+    /// 3 a tokio task). Refused by the OS, the clock runs at normal priority and
+    /// [`Emulator::clock_scheduling`] says why.
+    pub clock_priority: Option<crate::realtime::RtPriority>,
 }
 
 /// The largest [`EmulatorConfig::speedup`] [-]: 100. The clock runs one controller cycle
@@ -295,6 +300,7 @@ impl Default for EmulatorConfig {
             stall_timeout: Duration::from_secs(10),
             queue_packages: 1000,
             preclaimed_inputs: Vec::new(),
+            clock_priority: None,
         }
     }
 }
@@ -1378,6 +1384,8 @@ pub struct Emulator {
     secondary: SocketAddr,
     realtime: SocketAddr,
     programs: Arc<AtomicU64>,
+    /// How the clock thread runs, once it has started (`None` for a tokio-task clock).
+    clock_scheduling: Arc<std::sync::OnceLock<crate::realtime::Scheduling>>,
 }
 
 async fn bind(ip: IpAddr, port: u16, what: &str) -> Result<TcpListener> {
@@ -1442,19 +1450,29 @@ impl Emulator {
         let (pause, paused) = watch::channel(false);
         let clock_stop = Arc::new(AtomicBool::new(false));
         let ticker = Clock::new(world.clone(), cfg.speedup);
-        let (clock, clock_task) = if clock_on_own_thread(cfg.speedup) {
-            let stop = clock_stop.clone();
-            let thread = std::thread::Builder::new()
-                .name("emulator-clock".into())
-                .spawn(move || clock_thread(ticker, stop))
-                .map_err(|source| RobotIoError::Io {
-                    context: "starting the emulator's clock thread".into(),
-                    source,
-                })?;
-            (Some(thread), None)
-        } else {
-            (None, Some(tokio::spawn(clock_task(ticker))))
-        };
+        let clock_scheduling = Arc::new(std::sync::OnceLock::new());
+        let (clock, clock_task) =
+            if cfg.clock_priority.is_some() || clock_on_own_thread(cfg.speedup) {
+                let stop = clock_stop.clone();
+                let (priority, scheduling) = (cfg.clock_priority, clock_scheduling.clone());
+                let thread = std::thread::Builder::new()
+                    .name("emulator-clock".into())
+                    .spawn(move || {
+                        let got = crate::realtime::set_current_thread_opt(priority);
+                        if let crate::realtime::Scheduling::Refused { .. } = got {
+                            tracing::warn!("emulator clock: {got}");
+                        }
+                        let _ = scheduling.set(got);
+                        clock_thread(ticker, stop)
+                    })
+                    .map_err(|source| RobotIoError::Io {
+                        context: "starting the emulator's clock thread".into(),
+                        source,
+                    })?;
+                (Some(thread), None)
+            } else {
+                (None, Some(tokio::spawn(clock_task(ticker))))
+            };
         let mut tasks = vec![
             tokio::spawn(serve_rtde(rtde, world.clone(), cfg.clone(), paused.clone())),
             tokio::spawn(serve_dashboard(dash, world.clone(), paused.clone())),
@@ -1482,7 +1500,14 @@ impl Emulator {
             secondary: sec_addr,
             realtime: rt_addr,
             programs,
+            clock_scheduling,
         })
+    }
+
+    /// How the clock thread is scheduled ([`EmulatorConfig::clock_priority`]); `None` while it
+    /// has not started yet, or when the clock is a tokio task.
+    pub fn clock_scheduling(&self) -> Option<crate::realtime::Scheduling> {
+        self.clock_scheduling.get().cloned()
     }
 
     /// Bound RTDE address.

@@ -12,6 +12,7 @@
 //! - [`Emulator`]: a UR controller on loopback (RTDE 30004, dashboard 29999, script
 //!   30002/30003), backed by [`SimBackend`] or [`TraceBackend`].
 //! - [`script`]: our URScript control program and its register protocol; [`DashboardClient`].
+//! - [`realtime`]: `SCHED_FIFO` for the threads a control cycle waits on, reported when refused.
 //! - [`trace`]: UR `record.py` and ur_rtde CSV readers and writers, de-duplication, gap reports.
 //! - [`kinematics`]: UR5e forward kinematics and Jacobians, shared with `adapt` and `safety`.
 //! - [`geometry`]: the arm, gripper and carried part as capsules ([`geometry::ArmModel`]),
@@ -51,6 +52,7 @@ pub mod client;
 pub mod codec;
 pub mod dashboard;
 pub mod emulator;
+pub mod realtime;
 pub mod rtde_robot;
 pub mod script;
 

@@ -32,19 +32,21 @@
 //! meanwhile, the runtime asks for it again through [`TrialRobot::restart_program`], which
 //! re-sends it through a `ScriptSender` on the tokio runtime without blocking the loop.
 
-use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 use crate::Error;
 use crate::error::ResultExt as _;
 use robot_io::dashboard::DashboardClient;
 use robot_io::emulator::{Emulator, EmulatorConfig, SimBackend};
+use robot_io::realtime::{RtPriority, Scheduling};
 use robot_io::rtde_robot::{RtdeRobot, RtdeRobotConfig};
 use robot_io::script::RegisterMap;
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Robot, RobotState, runtime_state};
 
+use super::config::RealtimeConfig;
 use super::runtime::TrialRobot;
 
 /// How long `read_state` waits for a newer sample at least: one period of the real
@@ -168,6 +170,8 @@ pub(crate) struct PacedRtde {
     period: Duration,
     /// The in-process emulator behind it, for its servo statistics (`None`: a real robot).
     emulator: Option<Arc<Emulator>>,
+    /// How the RTDE client's I/O threads are scheduled (their first start says).
+    io_scheduling: IoScheduling,
 }
 
 impl std::fmt::Debug for PacedRtde {
@@ -179,13 +183,19 @@ impl std::fmt::Debug for PacedRtde {
 }
 
 impl PacedRtde {
-    fn new(robot: RtdeRobot, emulator: Option<Arc<Emulator>>, period: Duration) -> Self {
+    fn new(
+        robot: RtdeRobot,
+        emulator: Option<Arc<Emulator>>,
+        period: Duration,
+        io_scheduling: IoScheduling,
+    ) -> Self {
         Self {
             robot,
             last_ts: f64::NEG_INFINITY,
             last_fresh: None,
             period,
             emulator,
+            io_scheduling,
         }
     }
 }
@@ -234,6 +244,12 @@ impl TrialRobot for PacedRtde {
     fn emulator_clock(&self) -> Option<robot_io::emulator::ClockStats> {
         self.emulator.as_ref().map(|e| e.clock_stats())
     }
+    fn io_scheduling(&self) -> Option<Scheduling> {
+        self.io_scheduling.get().cloned()
+    }
+    fn emulator_clock_scheduling(&self) -> Option<Scheduling> {
+        self.emulator.as_ref().and_then(|e| e.clock_scheduling())
+    }
 }
 
 /// What keeps an RTDE robot's connection alive: the emulator (`None` for a real robot) and the
@@ -267,11 +283,29 @@ impl RtdeGuard {
     }
 }
 
-fn runtime() -> crate::Result<tokio::runtime::Runtime> {
+/// How the RTDE runtime's threads came up: the outcome of the first thread's request (every
+/// thread asks for the same priority).
+pub(crate) type IoScheduling = Arc<OnceLock<Scheduling>>;
+
+/// The tokio runtime of the RTDE client (and of the in-process emulator's servers): two
+/// workers, each put under `SCHED_FIFO` at `io_priority` when it starts (ur_rtde runs its
+/// receive thread so), or left at normal priority with the reason in the returned record.
+pub(crate) fn rtde_runtime(
+    io_priority: Option<RtPriority>,
+) -> crate::Result<(tokio::runtime::Runtime, IoScheduling)> {
+    let outcome: IoScheduling = Arc::new(OnceLock::new());
+    let record = Arc::clone(&outcome);
     tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
+        .on_thread_start(move || {
+            let got = robot_io::realtime::set_current_thread_opt(io_priority);
+            if record.set(got.clone()).is_ok() {
+                super::priority::warn_if_refused("the RTDE I/O threads", &got);
+            }
+        })
         .build()
+        .map(|rt| (rt, outcome))
         .map_err(|source| Error::Thread {
             name: "tokio runtime",
             source,
@@ -323,8 +357,9 @@ async fn connect(
 pub(crate) fn start_emulator(
     home_q: [f64; 6],
     speedup: u32,
+    realtime: RealtimeConfig,
 ) -> crate::Result<(PacedRtde, RtdeGuard)> {
-    let rt = runtime()?;
+    let (rt, io_scheduling) = rtde_runtime(realtime.rtde_io())?;
     let (emulator, robot) = rt.block_on(async {
         let sim = SimRobot::new(SimConfig {
             initial_q_rad: home_q,
@@ -333,6 +368,7 @@ pub(crate) fn start_emulator(
         let emu = Emulator::start(
             EmulatorConfig {
                 speedup,
+                clock_priority: realtime.emulator_clock(),
                 ..EmulatorConfig::ephemeral()
             },
             Box::new(SimBackend::new(sim)),
@@ -364,6 +400,7 @@ pub(crate) fn start_emulator(
         robot,
         Some(Arc::clone(&emulator)),
         UR_PERIOD / speedup.max(1),
+        io_scheduling,
     );
     Ok((
         robot,
@@ -383,9 +420,10 @@ pub(crate) fn start_emulator(
 pub(crate) fn connect_ur(
     host: &str,
     ports: UrPorts,
+    realtime: RealtimeConfig,
     stop: &AtomicBool,
 ) -> crate::Result<(PacedRtde, RtdeGuard)> {
-    let rt = runtime()?;
+    let (rt, io_scheduling) = rtde_runtime(realtime.rtde_io())?;
     rt.block_on(async {
         let mut d = DashboardClient::connect(host, ports.dashboard, Duration::from_secs(3))
             .await
@@ -436,7 +474,7 @@ pub(crate) fn connect_ur(
         ports.script,
         RegisterMap::default(),
     ))?;
-    let robot = PacedRtde::new(robot, None, UR_PERIOD);
+    let robot = PacedRtde::new(robot, None, UR_PERIOD, io_scheduling);
     Ok((robot, RtdeGuard { emulator: None, rt }))
 }
 
@@ -644,7 +682,8 @@ mod tests {
     #[test]
     fn read_state_returns_while_the_tokio_runtime_is_stuck() {
         let home = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0];
-        let (mut robot, guard) = start_emulator(home, 1).expect("emulator");
+        let (mut robot, guard) =
+            start_emulator(home, 1, RealtimeConfig::default()).expect("emulator");
         let mut s = RobotState::default();
         robot.read_state(&mut s).expect("a first state");
         let before = s.timestamp_s;

@@ -2,6 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
+use robot_io::realtime::RtPriority;
 use serde::Deserialize;
 
 use crate::Error;
@@ -45,6 +46,77 @@ pub struct TrialConfig {
     /// When a task counts as impossible (`[progress]`; defaults without the table).
     #[serde(default)]
     pub progress: ProgressConfig,
+    /// Real-time scheduling of the threads a control cycle waits on (`[realtime]`; defaults
+    /// without the table).
+    #[serde(default)]
+    pub realtime: RealtimeConfig,
+}
+
+/// `[realtime]`: `SCHED_FIFO` priorities [-] of the threads a 2 ms control cycle waits on
+/// (`robot_io::realtime`), each in [1, 99], 0 for normal scheduling. RTDE robots only (the
+/// emulator or a UR5e); `--robot sim` runs on a mock clock and changes no thread. The defaults
+/// follow ur_rtde's real-time examples (receive 90, control 85), with the emulator's clock, the
+/// controller's stand-in, above both. Refused by the OS (no `CAP_SYS_NICE`, `RLIMIT_RTPRIO`
+/// too low), a thread runs at normal priority, a warning says so and `summary.json`'s
+/// `motion.scheduling` records it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RealtimeConfig {
+    /// The control thread (read → controller → supervisor → send) [-].
+    pub control_priority: u8,
+    /// The RTDE client's I/O threads (receive samples, write commands), and the in-process
+    /// emulator's servers, which share them [-].
+    pub rtde_io_priority: u8,
+    /// The in-process emulator's clock thread [-].
+    pub emulator_clock_priority: u8,
+}
+
+impl Default for RealtimeConfig {
+    fn default() -> Self {
+        Self {
+            control_priority: 85,
+            rtde_io_priority: 90,
+            emulator_clock_priority: 95,
+        }
+    }
+}
+
+impl RealtimeConfig {
+    /// Refuses a priority outside 0 and [1, 99], naming its key.
+    fn validate(self) -> crate::Result<()> {
+        for (key, p) in [
+            ("realtime.control_priority", self.control_priority),
+            ("realtime.rtde_io_priority", self.rtde_io_priority),
+            (
+                "realtime.emulator_clock_priority",
+                self.emulator_clock_priority,
+            ),
+        ] {
+            ensure!(
+                p == 0 || RtPriority::new(p).is_ok(),
+                Error::config(
+                    key,
+                    format!("must be 0 (normal scheduling) or in [1, 99], got {p}")
+                )
+            );
+        }
+        Ok(())
+    }
+
+    /// The control thread's priority (`None`: normal scheduling).
+    pub(crate) fn control(self) -> Option<RtPriority> {
+        RtPriority::new(self.control_priority).ok()
+    }
+
+    /// The RTDE I/O threads' priority (`None`: normal scheduling).
+    pub(crate) fn rtde_io(self) -> Option<RtPriority> {
+        RtPriority::new(self.rtde_io_priority).ok()
+    }
+
+    /// The emulator clock's priority (`None`: normal scheduling).
+    pub(crate) fn emulator_clock(self) -> Option<RtPriority> {
+        RtPriority::new(self.emulator_clock_priority).ok()
+    }
 }
 
 /// `[link]`: a lost robot link (RTDE robots only; see `runtime.rs`, "Link loss").
@@ -202,6 +274,7 @@ impl TrialConfig {
                 )
             )
         );
+        cfg.realtime.validate()?;
         Ok(cfg)
     }
 
@@ -308,6 +381,53 @@ mod tests {
         ] {
             let e = with(key, bad).unwrap_err().with_causes().to_string();
             assert!(e.contains(key) && e.contains(bound), "{key} = {bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn realtime_priorities_are_0_or_1_to_99_and_the_error_names_the_key() {
+        let dir = Path::new("/cfg");
+        let shipped = TrialConfig::shipped().unwrap().realtime;
+        assert_eq!(
+            shipped,
+            RealtimeConfig::default(),
+            "the file states the defaults"
+        );
+        assert_eq!(shipped.control().map(RtPriority::get), Some(85));
+        assert_eq!(shipped.rtde_io().map(RtPriority::get), Some(90));
+        assert_eq!(shipped.emulator_clock().map(RtPriority::get), Some(95));
+        let with = |key: &str, value: &str| {
+            let line = SHIPPED_TOML
+                .lines()
+                .find(|l| l.starts_with(&format!("{key} = ")))
+                .unwrap_or_else(|| panic!("{key} is in the shipped config"));
+            TrialConfig::from_toml_str(
+                &SHIPPED_TOML.replace(line, &format!("{key} = {value}")),
+                dir,
+            )
+        };
+        for key in [
+            "control_priority",
+            "rtde_io_priority",
+            "emulator_clock_priority",
+        ] {
+            // 0: normal scheduling for that thread alone.
+            let off = with(key, "0").unwrap().realtime;
+            let none = match key {
+                "control_priority" => off.control().is_none() && off.rtde_io().is_some(),
+                "rtde_io_priority" => off.rtde_io().is_none() && off.emulator_clock().is_some(),
+                _ => off.emulator_clock().is_none() && off.control().is_some(),
+            };
+            assert!(none, "{key} = 0: {off:?}");
+            assert!(with(key, "99").is_ok());
+            let e = with(key, "100").unwrap_err().with_causes().to_string();
+            assert!(
+                e.contains(&format!("realtime.{key}")) && e.contains("[1, 99]"),
+                "{e}"
+            );
+            // Negative or fractional values are no u8: refused by the parser, naming the key.
+            let e = with(key, "-1").unwrap_err().with_causes().to_string();
+            assert!(e.contains(key), "{e}");
         }
     }
 

@@ -205,8 +205,12 @@ fn the_control_cycle_allocates_nothing_over_rtde_to_the_emulator() {
     let out = tempfile::tempdir().unwrap();
     let choice = RobotChoice::Emulator { speedup: 10 };
     let setup = load_setup(&spec, &choice, &CueSource::Simulated, out.path()).unwrap();
-    let (robot, guard) =
-        super::super::backend::start_emulator(setup.ctl_cfg.task.home_q_rad, 10).unwrap();
+    let (robot, guard) = super::super::backend::start_emulator(
+        setup.ctl_cfg.task.home_q_rad,
+        10,
+        Default::default(),
+    )
+    .unwrap();
     // Paced by the emulator's clock (one controller cycle per 0.2 ms of wall time): 25,000
     // cycles are at least 50 s of trial time (≈ 5 s of wall time; more trial time where the
     // loop skips samples), long enough to fetch, approach and present.
@@ -265,6 +269,7 @@ fn nothing_moves_before_the_first_cue_output() {
         n_handovers: 3,
         planned_start: vec![0.0, 0.0, 0.0],
         simulated: true,
+        control_scheduling: std::sync::OnceLock::new(),
     };
     let stop = AtomicBool::new(false);
     let end = control_loop(&plan, &mut cc, &mut log, &mut SilentCues, &stop);

@@ -788,6 +788,11 @@ impl TrialLog {
         self.motion.set_robot_servo(stats);
     }
 
+    /// `summary.json`'s `motion.scheduling`.
+    pub(crate) fn set_scheduling(&mut self, s: crate::trial::priority::SchedulingSummary) {
+        self.motion.set_scheduling(s);
+    }
+
     /// `summary.json`'s `motion.emulator_clock`.
     pub(crate) fn set_emulator_clock(&mut self, stats: robot_io::emulator::ClockStats) {
         self.motion.set_emulator_clock(stats);

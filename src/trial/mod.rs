@@ -37,6 +37,7 @@ use crate::Error;
 use clap::Args;
 use policies::PolicyKind;
 
+pub(crate) use backend::rtde_runtime;
 #[allow(unused_imports)] // for the experiment runner
 pub(crate) use cues::CueSource;
 pub use runtime::{TrialSpec, run_simulated};

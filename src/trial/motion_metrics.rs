@@ -71,6 +71,7 @@ use safety::{Requirement, Verdict, Violation};
 use serde::Serialize;
 
 use super::summary::r6;
+use crate::trial::priority::SchedulingSummary;
 
 /// A stop window ends this long after its last stop cycle [s].
 pub(crate) const STOP_TAIL_S: f64 = 1.0;
@@ -449,6 +450,8 @@ pub(crate) struct MotionMetrics {
     robot_servo: Option<ServoStats>,
     /// The in-process emulator's own clock (emulator runs only).
     emulator_clock: Option<ClockStats>,
+    /// How the threads were scheduled (RTDE robots only).
+    scheduling: Option<SchedulingSummary>,
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -479,6 +482,12 @@ impl MotionMetrics {
     /// (`motion.emulator_clock`).
     pub(crate) fn set_emulator_clock(&mut self, stats: ClockStats) {
         self.emulator_clock = Some(stats);
+    }
+
+    /// How the control thread, the RTDE I/O threads and the emulator's clock were scheduled
+    /// (`motion.scheduling`).
+    pub(crate) fn set_scheduling(&mut self, s: SchedulingSummary) {
+        self.scheduling = Some(s);
     }
 
     /// Empty metrics with every buffer preallocated.
@@ -514,6 +523,7 @@ impl MotionMetrics {
             time_scale_min: f64::INFINITY,
             robot_servo: None,
             emulator_clock: None,
+            scheduling: None,
         }
     }
 
@@ -908,6 +918,7 @@ impl MotionMetrics {
                 bursts: c.bursts,
                 holds_in_bursts: c.holds_in_bursts,
             }),
+            scheduling: self.scheduling.clone(),
         }
     }
 }
@@ -986,6 +997,10 @@ pub(crate) struct MotionSummary {
     /// How the emulator's own clock kept up (emulator runs only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub(crate) emulator_clock: Option<EmulatorClockSummary>,
+    /// How the threads a control cycle waits on were scheduled (RTDE robots only: the
+    /// `[realtime]` priorities, or why the OS refused them).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub(crate) scheduling: Option<SchedulingSummary>,
 }
 
 /// Counts of one requirement.

@@ -1,4 +1,5 @@
-//! Scheduling priority of the log-writer thread, and the control thread's timer slack.
+//! Scheduling priority of the log-writer thread, the control thread's timer slack, and the
+//! report of which threads run under `SCHED_FIFO` (`robot_io::realtime`, `[realtime]`).
 //!
 //! The control thread and (on `--robot emulator`) the emulator's clock must wake within a
 //! fraction of a 2 ms cycle. The log writer works in bursts: it formats what the control
@@ -18,6 +19,28 @@
 //! between polls. Linux lets a sleep run late by the thread's *timer slack* (50 µs by
 //! default), which would double each nap; [`tighten_timer_slack`] lowers it to
 //! [`CONTROL_TIMER_SLACK_NS`] for that thread.
+
+/// Warns (once per call) that `what` asked for real-time scheduling and the OS refused it.
+pub(crate) fn warn_if_refused(what: &str, got: &Scheduling) {
+    if let Scheduling::Refused { .. } = got {
+        tracing::warn!(
+            "{what}: {got}; the control cycle may then miss samples under load (README \"Real-time scheduling\")"
+        );
+    }
+}
+
+/// How the threads of an RTDE trial were scheduled: `summary.json`'s `motion.scheduling`.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub(crate) struct SchedulingSummary {
+    /// The control thread.
+    pub(crate) control: String,
+    /// The RTDE client's I/O threads.
+    pub(crate) rtde_io: Option<String>,
+    /// The in-process emulator's clock thread (`None`: no emulator, or a tokio-task clock).
+    pub(crate) emulator_clock: Option<String>,
+}
+
+use robot_io::realtime::Scheduling;
 
 /// The control thread's timer slack [ns]: 10 µs.
 pub(crate) const CONTROL_TIMER_SLACK_NS: u64 = 10_000;

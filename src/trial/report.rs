@@ -1288,6 +1288,20 @@ fn motion_section(h: &mut String, s: &Summary) {
             esc(&v)
         );
     }
+    if let Some(sc) = &m.scheduling {
+        let v = format!(
+            "control thread {}; RTDE I/O threads {}; emulator clock {}",
+            sc.control,
+            sc.rtde_io.as_deref().unwrap_or("none"),
+            sc.emulator_clock.as_deref().unwrap_or("none")
+        );
+        let _ = writeln!(
+            h,
+            "<tr><th>{}</th><td>{}</td></tr>",
+            esc("thread scheduling ([realtime])"),
+            esc(&v)
+        );
+    }
     h.push_str("</table>\n");
 
     let i = &m.interventions;

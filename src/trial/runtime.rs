@@ -353,6 +353,15 @@ pub(crate) trait TrialRobot: Robot + Send {
     fn emulator_clock(&self) -> Option<robot_io::emulator::ClockStats> {
         None
     }
+    /// How the RTDE client's I/O threads are scheduled (`None`: no such threads).
+    fn io_scheduling(&self) -> Option<robot_io::realtime::Scheduling> {
+        None
+    }
+    /// How the in-process emulator's clock thread is scheduled (`None`: no emulator, or its
+    /// clock is a tokio task).
+    fn emulator_clock_scheduling(&self) -> Option<robot_io::realtime::Scheduling> {
+        None
+    }
 }
 
 impl TrialRobot for LockstepSim {}
@@ -537,7 +546,8 @@ pub(crate) fn run_trial_with_cues(
             )
         }
         RobotChoice::Emulator { speedup } => {
-            let (robot, guard) = super::backend::start_emulator(home, *speedup)?;
+            let (robot, guard) =
+                super::backend::start_emulator(home, *speedup, spec.config.realtime)?;
             let out = drive(
                 spec,
                 setup,
@@ -552,7 +562,8 @@ pub(crate) fn run_trial_with_cues(
             out
         }
         RobotChoice::Ur { host, ports } => {
-            let (robot, guard) = super::backend::connect_ur(host, *ports, stop)?;
+            let (robot, guard) =
+                super::backend::connect_ur(host, *ports, spec.config.realtime, stop)?;
             let out = drive(
                 spec,
                 setup,
@@ -745,6 +756,7 @@ fn drive<R: TrialRobot>(
         n_handovers,
         planned_start,
         simulated,
+        control_scheduling: std::sync::OnceLock::new(),
     };
     // --- The loop, then the one exit path: every ending comes here. ---
     // 1. The control loop ends by stopping the robot through the supervisor.
@@ -778,6 +790,14 @@ fn drive<R: TrialRobot>(
     }
     if let Some(st) = cc.supervisor.robot().emulator_clock() {
         log.set_emulator_clock(st);
+    }
+    if let Some(control) = plan.control_scheduling.get() {
+        let robot = cc.supervisor.robot();
+        log.set_scheduling(crate::trial::priority::SchedulingSummary {
+            control: control.to_string(),
+            rtde_io: robot.io_scheduling().map(|s| s.to_string()),
+            emulator_clock: robot.emulator_clock_scheduling().map(|s| s.to_string()),
+        });
     }
     let event = log.event(t_end, &TrialEvent::Finished { reason });
     let finished = log.finish();
@@ -836,6 +856,9 @@ struct LoopPlan<'a> {
     n_handovers: u32,
     planned_start: Vec<f64>,
     simulated: bool,
+    /// How the control thread was scheduled (set by the threaded loop; unset on the mock
+    /// clock, where no thread is spawned).
+    control_scheduling: std::sync::OnceLock<robot_io::realtime::Scheduling>,
 }
 
 /// What the cue cycle sees of the robot, once per control cycle.
@@ -1446,6 +1469,10 @@ mod threaded {
                 .name("control".into())
                 .spawn_scoped(scope, move || {
                     crate::trial::priority::tighten_timer_slack();
+                    let sched =
+                        robot_io::realtime::set_current_thread_opt(plan.cfg.realtime.control());
+                    crate::trial::priority::warn_if_refused("the control thread", &sched);
+                    let _ = plan.control_scheduling.set(sched);
                     let mut link = ThreadedCues {
                         to_cue: to_cue_in,
                         from_cue: from_cue_out,

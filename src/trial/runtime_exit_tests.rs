@@ -69,7 +69,11 @@ fn run_on_emulator(
     let _one_at_a_time = EMULATOR_TESTS.lock().unwrap_or_else(|e| e.into_inner());
     let choice = RobotChoice::Emulator { speedup: 10 };
     let setup = load_setup(spec, &choice, &CueSource::Simulated, out)?;
-    let (robot, guard) = super::super::backend::start_emulator(setup.ctl_cfg.task.home_q_rad, 10)?;
+    let (robot, guard) = super::super::backend::start_emulator(
+        setup.ctl_cfg.task.home_q_rad,
+        10,
+        Default::default(),
+    )?;
     let emu = guard.emulator().expect("in-process");
     let r = drive(
         spec,

@@ -83,9 +83,31 @@ fn emulator_trial_runs_over_loopback_rtde_and_writes_every_file() {
         "{clock}"
     );
     assert!(n("holds_in_bursts") <= n("bursts"), "{clock}");
+    // The threads a cycle waits on run under SCHED_FIFO at the shipped [realtime]
+    // priorities where this machine allows it (a thread of this test asks the same), and
+    // are reported as refused where it does not: never claimed, never left out.
+    let allowed = std::thread::spawn(|| {
+        let p = robot_io::realtime::RtPriority::new(95).unwrap();
+        robot_io::realtime::set_current_thread(p).is_realtime()
+    })
+    .join()
+    .unwrap();
+    let sched = &json["motion"]["scheduling"];
+    for (key, prio) in [("control", 85), ("rtde_io", 90), ("emulator_clock", 95)] {
+        let got = sched[key]
+            .as_str()
+            .unwrap_or_else(|| panic!("{key}: {sched}"));
+        let want = if allowed {
+            format!("SCHED_FIFO {prio}")
+        } else {
+            format!("normal (SCHED_FIFO {prio} refused: ")
+        };
+        assert!(got.starts_with(&want), "{key}: {got}, want {want}…");
+    }
     let report = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(report.contains("robot side (emulator): servo commands"));
     assert!(report.contains("emulator clock (its host, not the client)"));
+    assert!(report.contains("thread scheduling ([realtime])"));
     // Paced on the controller clock: about 6 s of trial time were assessed at 30 Hz.
     let rows = std::fs::read_to_string(out.join("indicators.csv"))
         .unwrap()
@@ -184,6 +206,10 @@ fn same_seed_and_config_give_byte_identical_indicators_and_summary() {
     let text = std::fs::read_to_string(da.join("summary.json")).unwrap();
     assert!(!text.contains("robot_servo"), "{text}");
     assert!(!text.contains("emulator_clock"), "{text}");
+    assert!(
+        !text.contains("scheduling"),
+        "no thread on the mock clock: {text}"
+    );
     let report = std::fs::read_to_string(da.join("report.html")).unwrap();
     assert!(!report.contains("robot side (emulator)"));
     let dc = sim(&c, "43");
