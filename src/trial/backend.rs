@@ -97,9 +97,10 @@ pub(crate) trait SampleSource {
 /// read's result: `Ok` with the previous state again (the caller counts a missed cycle), or
 /// that read's error (the link is down).
 ///
-/// Bound: it returns by `wait` + one nap's overshoot + one read after the call, and a sample
-/// that becomes readable before the deadline is always returned (the last read is made at or
-/// after the deadline). Naps are at most [`POLL_NAP`].
+/// Bound: it returns by `wait` + the longer of one nap's overshoot and one read, + one read,
+/// after the call. A sample that becomes readable before the deadline is always returned: the
+/// last read *starts* at or after the deadline (a read that started before it and ended after
+/// it is followed by one more at once, with no nap). Naps are at most [`POLL_NAP`].
 pub(crate) fn paced_read<S: SampleSource>(
     src: &mut S,
     last_ts: &mut f64,
@@ -108,16 +109,19 @@ pub(crate) fn paced_read<S: SampleSource>(
 ) -> robot_io::Result<()> {
     let deadline = src.now() + wait;
     loop {
+        let started = src.now();
         let r = src.read(out);
         if r.is_ok() && out.timestamp_s > *last_ts {
             *last_ts = out.timestamp_s;
             return Ok(());
         }
-        let now = src.now();
-        if now >= deadline {
+        if started >= deadline {
             return r;
         }
-        src.nap(deadline.saturating_duration_since(now).min(POLL_NAP));
+        let now = src.now();
+        if now < deadline {
+            src.nap(deadline.saturating_duration_since(now).min(POLL_NAP));
+        }
     }
 }
 
@@ -567,7 +571,8 @@ mod tests {
 
     proptest! {
         /// The wait's bound (issue 10: the control cycle never blocks longer than one
-        /// cycle): `paced_read` returns by the deadline + one nap's overshoot + one read,
+        /// cycle): `paced_read` returns by the deadline + the longer of one nap's overshoot
+        /// and one read, + one read,
         /// never naps longer than POLL_NAP, returns a sample that was readable (link up)
         /// at the deadline, and otherwise returns only once the whole wait has passed.
         #[test]
@@ -582,7 +587,7 @@ mod tests {
             let elapsed = s.now;
             let max_over = *s.overshoot_us.iter().max().unwrap();
             let max_cost = *s.read_cost_us.iter().max().unwrap();
-            prop_assert!(elapsed <= wait + Duration::from_micros(max_over + max_cost),
+            prop_assert!(elapsed <= wait + Duration::from_micros(max_over.max(max_cost) + max_cost),
                 "returned after {elapsed:?}");
             prop_assert!(s.naps.iter().all(|n| *n <= POLL_NAP));
             let fresh = r.is_ok() && out.timestamp_s > s.previous_ts;
@@ -672,6 +677,48 @@ mod tests {
         assert_eq!(out.timestamp_s, 1.002, "the previous state again");
         assert!(s.now >= t2 + SAMPLE_WAIT);
         assert!(s.now <= t2 + SAMPLE_WAIT + Duration::from_micros(30));
+    }
+
+    /// Worked example, by hand (the case CI's proptest found): the one sample becomes
+    /// readable at 1.97 ms and reads cost 68 µs, naps overshoot 300 µs. Reads start at 0,
+    /// 418, 836, 1254, 1672 µs; the one at 1672 µs ends at 1740, the nap ends at
+    /// 1740 + 50 + 300 = 2090 µs, past the 2 ms deadline, and the read that starts there sees
+    /// the sample. A read that starts before the sample and ends after the deadline is
+    /// followed by one more at once.
+    #[test]
+    fn a_sample_readable_before_the_deadline_is_returned_when_a_read_crosses_it() {
+        let script = |overshoot: u64, first_read_at: u64| Script {
+            base: Instant::now(),
+            now: Duration::from_micros(first_read_at),
+            samples: vec![(1_970, 1.000)],
+            down: vec![],
+            read_cost_us: vec![68],
+            overshoot_us: vec![overshoot],
+            reads: 0,
+            naps: Vec::new(),
+            previous_ts: 0.998,
+        };
+        let mut s = script(300, 0);
+        let (mut last, mut out) = (0.998, RobotState::default());
+        paced_read(&mut s, &mut last, &mut out, SAMPLE_WAIT).unwrap();
+        assert_eq!(out.timestamp_s, 1.000);
+        assert_eq!(s.reads, 6);
+        assert_eq!(s.now, Duration::from_micros(2_090 + 68));
+        // Called at 1950 µs with a 30 µs wait (deadline 1980 µs): the first read runs over
+        // [1950, 2018) µs and misses the sample of 1970 µs; the second starts at once, at
+        // 2018 µs, and returns it.
+        let mut s2 = script(0, 1_950);
+        let (mut last, mut out) = (0.998, RobotState::default());
+        paced_read(&mut s2, &mut last, &mut out, Duration::from_micros(30)).unwrap();
+        assert_eq!(
+            out.timestamp_s, 1.000,
+            "the read after the crossing one sees the sample"
+        );
+        assert_eq!(s2.reads, 2);
+        assert!(
+            s2.naps.is_empty(),
+            "no nap after a read that ended past the deadline"
+        );
     }
 
     /// The real client behind `read_state`, with the tokio runtime that runs the client's
