@@ -73,13 +73,13 @@ pub struct EmulateArgs {
     #[arg(long, default_value_t = 1, value_parser = crate::trial::speedup_parser())]
     speedup: u32,
     /// SCHED_FIFO priority of the emulator's clock thread, as a controller's real-time clock
-    /// (0 = normal scheduling), 0..=99. Refused by the OS (no CAP_SYS_NICE or RLIMIT_RTPRIO),
-    /// it runs at normal priority and a warning says so.
-    #[arg(long, default_value_t = 95, value_parser = clap::value_parser!(u8).range(0..=99))]
+    /// (0 = normal scheduling, the default), 0..=99. Refused by the OS (no CAP_SYS_NICE or
+    /// RLIMIT_RTPRIO), it runs at normal priority and a warning says so.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=99))]
     clock_priority: u8,
     /// SCHED_FIFO priority of the threads that serve RTDE, dashboard and script clients
-    /// (0 = normal scheduling), 0..=99; refused, as --clock-priority.
-    #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u8).range(0..=99))]
+    /// (0 = normal scheduling, the default), 0..=99; refused, as --clock-priority.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=99))]
     io_priority: u8,
 }
 

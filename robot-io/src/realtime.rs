@@ -3,18 +3,21 @@
 //! A control cycle is only as punctual as the slowest thread on its path: the controller's
 //! clock (the emulator's, when it stands in for one), the thread that receives RTDE samples
 //! and writes commands, and the control thread itself. Under Linux's normal scheduler
-//! (`SCHED_OTHER`) a thread that wakes can wait for another process's time slice: with one core
-//! kept busy by a spinning process, the trial's samples reached the control thread up to 21 ms
-//! late (issue 10, session 11; BENCHMARKS.md). ur_rtde therefore runs its receive and control
-//! threads under `SCHED_FIFO` (its examples: receive 90, control 85), and so do we:
-//! [`set_current_thread`] puts the calling thread under `SCHED_FIFO` at a [`RtPriority`].
+//! (`SCHED_OTHER`) a thread that wakes can wait for another process's time slice. ur_rtde
+//! therefore lets its receive and control threads run under `SCHED_FIFO` when given a priority
+//! (its real-time examples: receive 90, control 85), and so does the trial (`[realtime]` in
+//! `config/trial.toml`, off by default as in ur_rtde): [`set_current_thread`] puts the calling
+//! thread under `SCHED_FIFO` at a [`RtPriority`]. A `SCHED_FIFO` thread that rarely sleeps
+//! takes its core from every normal thread, so the threads given a priority must be the ones
+//! that wait most of each cycle.
 //!
 //! This needs `CAP_SYS_NICE` or an `RLIMIT_RTPRIO` of at least the priority (on a lab PC:
 //! `@realtime - rtprio 99` in `/etc/security/limits.conf`). Without it the call fails with the
 //! OS error and the thread keeps its scheduling; the caller reports that
 //! ([`Scheduling::Refused`]) instead of pretending. Linux's real-time throttling
-//! (`kernel.sched_rt_runtime_us`, 95 % by default) keeps a runaway real-time thread from
-//! starving the machine. Elsewhere than on Linux nothing is changed.
+//! (`kernel.sched_rt_runtime_us`, 95 % by default) leaves normal threads 5 % of the CPU:
+//! enough to stop a runaway real-time thread, not to run a trial's cue cycle beside one.
+//! Elsewhere than on Linux nothing is changed.
 //!
 //! # Example
 //! ```

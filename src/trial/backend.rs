@@ -363,6 +363,18 @@ pub(crate) fn start_emulator(
     speedup: u32,
     realtime: RealtimeConfig,
 ) -> crate::Result<(PacedRtde, RtdeGuard)> {
+    let asked = [
+        realtime.control(),
+        realtime.rtde_io(),
+        realtime.emulator_clock(),
+    ];
+    if speedup > 1 && asked.iter().any(Option::is_some) {
+        tracing::warn!(
+            "[realtime] priorities with the emulator at speedup {speedup}: its real-time \
+             threads can take every core and starve the cue cycle (the robot then stops for \
+             stale perception, SAF-REQ-008); they are meant for speedup 1"
+        );
+    }
     let (rt, io_scheduling) = rtde_runtime(realtime.rtde_io())?;
     let (emulator, robot) = rt.block_on(async {
         let sim = SimRobot::new(SimConfig {

@@ -72,7 +72,7 @@ fn run_on_emulator(
     let (robot, guard) = super::super::backend::start_emulator(
         setup.ctl_cfg.task.home_q_rad,
         10,
-        Default::default(),
+        spec.config.realtime,
     )?;
     let emu = guard.emulator().expect("in-process");
     let r = drive(
