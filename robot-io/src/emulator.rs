@@ -83,6 +83,10 @@ pub struct EmulatorConfig {
     /// 3 a tokio task). Refused by the OS, the clock runs at normal priority and
     /// [`Emulator::clock_scheduling`] says why.
     pub clock_priority: Option<crate::realtime::RtPriority>,
+    /// A sped-up clock (`speedup` > 1) waits for a late client at most this long [wall time]
+    /// before it runs on (`None`: never waits, as a controller; see [`ClientWait`]). Refused
+    /// at speedup 1: a real-time clock never waits.
+    pub wait_for_client: Option<Duration>,
 }
 
 /// The largest [`EmulatorConfig::speedup`] [-]: 100. The clock runs one controller cycle
@@ -221,7 +225,8 @@ impl Slew {
 
 /// How the emulator's clock kept up with wall time ([`Emulator::clock_stats`]), in controller
 /// cycles. As of the clock's last wake,
-/// `cycles_run + cycles_dropped + cycles_paused + cycles_behind == cycles_elapsed` exactly.
+/// `cycles_run + cycles_dropped + cycles_paused + cycles_waited + cycles_behind ==
+/// cycles_elapsed` exactly.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct ClockStats {
     /// Cycles due since the start (wall time × speedup / 2 ms), as of the clock's last wake
@@ -250,6 +255,81 @@ pub struct ClockStats {
     /// Servo holds ([`ServoStats::holds`]) that began in such a burst: the program ran past its
     /// extrapolation bound while the emulator, not the client, was late [-].
     pub holds_in_bursts: u64,
+    /// Cycles not run because the sped-up clock waited for a late client ([`ClientWait`];
+    /// virtual time stood still, as while paused) [cycles].
+    pub cycles_waited: u64,
+    /// Times the clock began to wait for a late client [-].
+    pub waits: u64,
+    /// Waits that reached [`EmulatorConfig::wait_for_client`]: the clock then ran on as a
+    /// controller's does (the program extrapolated, held, or its watchdog fired) [-].
+    pub waits_timed_out: u64,
+}
+
+/// How a sped-up emulator clock waits for a late client ([`EmulatorConfig::wait_for_client`]).
+///
+/// A real controller never waits: a servo command that misses its cycle is extrapolated for
+/// a few cycles, then held, and the arm brakes. At speedup 1 the emulator does the same. At
+/// speedup N a client must answer N times as fast as a real controller asks; a 2 ms stall of
+/// a busy 2-core machine is then 4 missed cycles at speedup 4, where a UR5e would see one.
+/// So a sped-up clock, a virtual clock with no wall-time meaning, waits instead, as a
+/// lockstep simulator does: at a wake where the program would have to extrapolate a moving
+/// servo target because no newer command came ([`EmulatorBackend::awaits_command`]), no cycle
+/// runs and virtual time stands still, until the command comes or `max` has passed. After
+/// `max` the clock runs on (the client counts as late, as on a controller) and waits again only
+/// once the client has caught up. Cycles not run are counted ([`ClockStats::cycles_waited`]),
+/// never hidden.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ClientWait {
+    max: Duration,
+    /// When the current wait began (`None`: not waiting).
+    since: Option<Instant>,
+    /// The current wait reached `max`: run on until the client is current again.
+    timed_out: bool,
+}
+
+/// What the clock does at one wake with a [`ClientWait`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WaitDecision {
+    /// Run the cycles due.
+    Run,
+    /// Run no cycle now; `began` is true at the first wake of this wait.
+    Wait {
+        /// The first wake of this wait.
+        began: bool,
+    },
+    /// The wait reached its bound at this wake: run the cycles due.
+    TimedOut,
+}
+
+impl ClientWait {
+    /// Waits of at most `max` [wall time].
+    pub fn new(max: Duration) -> Self {
+        Self {
+            max,
+            since: None,
+            timed_out: false,
+        }
+    }
+
+    /// The decision at a wake at `now` where the program `awaits` a command.
+    pub fn decide(&mut self, awaits: bool, now: Instant) -> WaitDecision {
+        if !awaits {
+            self.since = None;
+            self.timed_out = false;
+            return WaitDecision::Run;
+        }
+        if self.timed_out {
+            return WaitDecision::Run;
+        }
+        let since = *self.since.get_or_insert(now);
+        if now.saturating_duration_since(since) >= self.max {
+            self.timed_out = true;
+            return WaitDecision::TimedOut;
+        }
+        WaitDecision::Wait {
+            began: since == now,
+        }
+    }
 }
 
 /// How our control program's servo commands reached it and what it did with them, counted
@@ -301,6 +381,7 @@ impl Default for EmulatorConfig {
             queue_packages: 1000,
             preclaimed_inputs: Vec::new(),
             clock_priority: None,
+            wait_for_client: None,
         }
     }
 }
@@ -394,6 +475,12 @@ pub trait EmulatorBackend: Send + std::fmt::Debug + 'static {
     /// ([`SimBackend`]; default: `None`).
     fn servo_stats(&self) -> Option<ServoStats> {
         None
+    }
+    /// Whether the program's next cycle would have to extrapolate a moving servo target
+    /// because no newer command has been written since the last cycle ([`ClientWait`];
+    /// default: never).
+    fn awaits_command(&self, _inputs: &InputRegisters) -> bool {
+        false
     }
     /// For tests and tools that need the concrete backend.
     fn as_any_mut(&mut self) -> &mut dyn Any;
@@ -637,6 +724,20 @@ impl SimBackend {
 }
 
 impl EmulatorBackend for SimBackend {
+    fn awaits_command(&self, inputs: &InputRegisters) -> bool {
+        let (Some(map), Some(servo)) = (self.program, &self.servo) else {
+            return false;
+        };
+        let moving = servo.feedforward.clamped().qd.iter().any(|v| *v != 0.0);
+        let seq = inputs.int.get(usize::from(map.int_base) + 1).copied();
+        moving
+            && seq == self.last_seq
+            && servo
+                .feedforward
+                .since_valid_s(self.tick.wrapping_add(1), CYCLE_S)
+                > 0.0
+    }
+
     fn servo_stats(&self) -> Option<ServoStats> {
         Some(self.servo_stats)
     }
@@ -1412,6 +1513,13 @@ impl Emulator {
                 reason: "speedup and queue_packages must be at least 1".into(),
             });
         }
+        if cfg.speedup == 1 && cfg.wait_for_client.is_some() {
+            return Err(RobotIoError::InvalidConfig {
+                reason: "wait_for_client needs speedup > 1: at speedup 1 the clock is a \
+                         controller's real-time clock, which never waits for a client"
+                    .into(),
+            });
+        }
         if cfg.speedup > MAX_SPEEDUP {
             return Err(RobotIoError::InvalidConfig {
                 reason: format!(
@@ -1449,7 +1557,8 @@ impl Emulator {
         let programs = Arc::new(AtomicU64::new(0));
         let (pause, paused) = watch::channel(false);
         let clock_stop = Arc::new(AtomicBool::new(false));
-        let ticker = Clock::new(world.clone(), cfg.speedup);
+        let mut ticker = Clock::new(world.clone(), cfg.speedup);
+        ticker.wait = cfg.wait_for_client.map(ClientWait::new);
         let clock_scheduling = Arc::new(std::sync::OnceLock::new());
         let (clock, clock_task) =
             if cfg.clock_priority.is_some() || clock_on_own_thread(cfg.speedup) {
@@ -1682,9 +1791,11 @@ struct Clock {
     max: u64,
     window: u64,
     start: Instant,
-    /// Cycles run, dropped or paused [cycles].
+    /// Cycles run, dropped, paused or waited [cycles].
     done: u64,
     slew: Slew,
+    /// Waiting for a late client (sped-up clocks only; `None`: never).
+    wait: Option<ClientWait>,
 }
 
 impl Clock {
@@ -1697,6 +1808,7 @@ impl Clock {
             start: Instant::now(),
             done: 0,
             slew: Slew::default(),
+            wait: None,
         }
     }
 
@@ -1730,6 +1842,22 @@ impl Clock {
             self.done = due;
             self.slew.reset();
             return;
+        }
+        if let Some(wait) = self.wait.as_mut().filter(|_| due > done) {
+            let awaits = w.backend.awaits_command(&w.inputs);
+            match wait.decide(awaits, Instant::now()) {
+                WaitDecision::Run => {}
+                WaitDecision::TimedOut => w.clock.waits_timed_out += 1,
+                WaitDecision::Wait { began } => {
+                    // As while paused: the due cycles are not run, virtual time stands still.
+                    w.clock.waits += u64::from(began);
+                    w.clock.cycles_waited += due - done;
+                    w.clock.cycles_behind = 0;
+                    self.done = due;
+                    self.slew.reset();
+                    return;
+                }
+            }
         }
         let allowance = self.slew.on_wake(v, done, self.window);
         let plan = plan_ticks(due, done, self.max, allowance);

@@ -326,7 +326,7 @@ fn the_clock_slews_a_backlog_one_cycle_per_wake_at_a_quarter_over_its_rate() {
 /// Checks the clock invariants of [`ClockStats`] on `s`.
 fn consistent(s: ClockStats) -> ClockStats {
     assert_eq!(
-        s.cycles_run + s.cycles_dropped + s.cycles_paused + s.cycles_behind,
+        s.cycles_run + s.cycles_dropped + s.cycles_paused + s.cycles_waited + s.cycles_behind,
         s.cycles_elapsed,
         "{s:?}"
     );

@@ -18,16 +18,22 @@ const SAMPLE_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// The emulator at `speedup` with our program playing, and an RtdeRobot on it.
 async fn setup(speedup: u32, map: RegisterMap) -> (Emulator, RtdeRobot) {
-    let sim = SimRobot::new(SimConfig::ur5e()).unwrap();
-    let emu = Emulator::start(
+    setup_with(
         EmulatorConfig {
             speedup,
             ..EmulatorConfig::ephemeral()
         },
-        Box::new(SimBackend::new(sim)),
+        map,
     )
     .await
-    .unwrap();
+}
+
+/// The emulator with `cfg`, our program playing, and an RtdeRobot on it.
+async fn setup_with(cfg: EmulatorConfig, map: RegisterMap) -> (Emulator, RtdeRobot) {
+    let sim = SimRobot::new(SimConfig::ur5e()).unwrap();
+    let emu = Emulator::start(cfg, Box::new(SimBackend::new(sim)))
+        .await
+        .unwrap();
     let mut cfg = RtdeRobotConfig::new("127.0.0.1");
     cfg.port = emu.rtde_addr().port();
     cfg.registers = map;
@@ -115,6 +121,100 @@ async fn an_unrefreshed_ramp_target_is_extrapolated_at_the_ramp_velocity_up_to_t
     })
     .await
     .expect("test timed out");
+}
+
+/// A sped-up clock with `wait_for_client` waits for a late client instead of extrapolating
+/// (`robot_io::emulator::ClientWait`): after one moving servo target and then silence,
+/// virtual time stands still (cycles counted as waited, none run) for as long as the bound
+/// allows, here 30 s; a new command lets it run on. With a short bound (50 ms) it runs on
+/// after the bound, as a controller would, and counts the timed-out wait. Nothing depends on
+/// how fast this machine is: the long bound is never reached, the short one always is.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_sped_up_clock_waits_for_a_late_client_and_runs_on_after_the_bound() {
+    tokio::time::timeout(TEST_TIMEOUT, async {
+        let map = RegisterMap {
+            watchdog_hz: 1.0,
+            extrapolate_max_s: 0.024,
+            ..RegisterMap::default()
+        };
+        for (bound, times_out) in [
+            (Duration::from_secs(30), false),
+            (Duration::from_millis(50), true),
+        ] {
+            let cfg = EmulatorConfig {
+                speedup: 4,
+                wait_for_client: Some(bound),
+                ..EmulatorConfig::ephemeral()
+            };
+            let (emu, mut robot) = setup_with(cfg, map).await;
+            let mut s = RobotState::default();
+            robot.wait_state(&mut s, SAMPLE_TIMEOUT).await.unwrap();
+            let (q0, t0) = (s.actual_q, s.timestamp_s);
+            let mut target = q0;
+            for _ in 0..3 {
+                robot.wait_state(&mut s, SAMPLE_TIMEOUT).await.unwrap();
+                target = q0;
+                target[0] += 0.25 * (s.timestamp_s + 0.002 - t0);
+                robot.send(&servo(target)).unwrap();
+            }
+            assert_eq!(emu.clock_stats().waits_timed_out, 0);
+            // Silence: the clock begins to wait within a few cycles.
+            let mut waiting = emu.clock_stats();
+            for _ in 0..10_000 {
+                waiting = emu.clock_stats();
+                if waiting.waits > 0 && waiting.cycles_waited > 0 {
+                    break;
+                }
+                tokio::time::sleep(Duration::from_millis(1)).await;
+            }
+            assert!(waiting.waits > 0, "never waited: {waiting:?}");
+            tokio::time::sleep(Duration::from_millis(200)).await;
+            let later = emu.clock_stats();
+            if times_out {
+                assert!(later.waits_timed_out >= 1, "{later:?}");
+                assert!(later.cycles_run > waiting.cycles_run, "ran on: {later:?}");
+            } else {
+                assert_eq!(later.waits_timed_out, 0, "{later:?}");
+                assert_eq!(
+                    later.cycles_run, waiting.cycles_run,
+                    "a cycle ran while waiting"
+                );
+                assert!(later.cycles_waited > waiting.cycles_waited, "{later:?}");
+                // The next command, for the cycle after the newest sample: the clock runs on.
+                robot.wait_state(&mut s, SAMPLE_TIMEOUT).await.unwrap();
+                target[0] += 0.0005;
+                robot.send(&servo(target)).unwrap();
+                let mut ran = later;
+                for _ in 0..10_000 {
+                    ran = emu.clock_stats();
+                    if ran.cycles_run > later.cycles_run {
+                        break;
+                    }
+                    tokio::time::sleep(Duration::from_millis(1)).await;
+                }
+                assert!(ran.cycles_run > later.cycles_run, "never ran on: {ran:?}");
+            }
+        }
+    })
+    .await
+    .expect("test timed out");
+}
+
+/// A real-time clock (speedup 1) never waits: `wait_for_client` there is refused.
+#[tokio::test]
+async fn waiting_for_the_client_is_refused_at_speedup_1() {
+    let sim = SimRobot::new(SimConfig::ur5e()).unwrap();
+    let e = Emulator::start(
+        EmulatorConfig {
+            speedup: 1,
+            wait_for_client: Some(Duration::from_millis(20)),
+            ..EmulatorConfig::ephemeral()
+        },
+        Box::new(SimBackend::new(sim)),
+    )
+    .await
+    .expect_err("refused");
+    assert!(e.to_string().contains("speedup > 1"), "{e}");
 }
 
 /// `send` only peeks at the newest sample for the age: a client reading every sample in

@@ -661,3 +661,74 @@ fn run_stamped_ahead(stretch: u64) -> Run {
     }
     run
 }
+
+/// `awaits_command` (what a sped-up emulator clock waits on, `ClientWait`), by hand: a moving
+/// target written for the next tick is not awaited (it is new); once the program has run it at
+/// its tick, the next cycle would extrapolate it, so the program awaits the next command; that
+/// command, even one written late, ends the wait. A target at rest is never awaited (holding
+/// it moves nothing), and neither is anything before our program runs.
+#[test]
+fn the_program_awaits_a_command_only_when_it_would_extrapolate_a_moving_target() {
+    let robot = SimRobot::new(SimConfig::ur5e()).unwrap();
+    let idle = SimBackend::new(robot);
+    assert!(
+        !idle.awaits_command(&InputRegisters::default()),
+        "no program"
+    );
+
+    let (mut b, q) = bench_at_rest();
+    let awaits = |b: &Bench| b.backend.awaits_command(&b.inputs);
+    assert!(!awaits(&b), "no servo command in force");
+    let moving = ServoFeedforward {
+        qd: [0.5, 0.0, 0.0, 0.0, 0.0, 0.0],
+        qdd: [0.0; 6],
+        valid_tick: b.valid_tick(0),
+    };
+    b.write(&servo(q), &moving);
+    assert!(!awaits(&b), "a new command is there");
+    b.step();
+    assert!(
+        awaits(&b),
+        "run at its tick: the next cycle would extrapolate it"
+    );
+    // Written 3 ticks late: new, so not awaited; after the cycle that ran it (extrapolated)
+    // it is awaited again.
+    let valid_tick = b.valid_tick(3);
+    b.write(
+        &servo(q),
+        &ServoFeedforward {
+            valid_tick,
+            ..moving
+        },
+    );
+    assert!(!awaits(&b));
+    b.step();
+    assert!(awaits(&b));
+    // A target written one tick ahead (the client predicted past a late sample): its tick
+    // has not come after this cycle, so nothing would be extrapolated yet.
+    let valid_tick = b.valid_tick(-1);
+    b.write(
+        &servo(q),
+        &ServoFeedforward {
+            valid_tick,
+            ..moving
+        },
+    );
+    b.step();
+    assert!(!awaits(&b), "its own tick is the next");
+    b.step();
+    assert!(awaits(&b));
+    // At rest: nothing to extrapolate, nothing awaited, however stale.
+    let valid_tick = b.valid_tick(0);
+    b.write(
+        &servo(q),
+        &ServoFeedforward {
+            valid_tick,
+            ..ServoFeedforward::ZERO
+        },
+    );
+    for _ in 0..5 {
+        b.step();
+        assert!(!awaits(&b));
+    }
+}

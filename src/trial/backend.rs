@@ -46,7 +46,7 @@ use robot_io::script::RegisterMap;
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{JointCommand, Robot, RobotState, runtime_state};
 
-use super::config::RealtimeConfig;
+use super::config::{EmulatorSection, RealtimeConfig};
 use super::runtime::TrialRobot;
 
 /// How long `read_state` waits for a newer sample at least: one period of the real
@@ -357,11 +357,13 @@ async fn connect(
 
 /// Starts the emulator in-process on ephemeral loopback ports with a `SimRobot` at `home_q`,
 /// running `speedup` controller cycles per 2 ms of wall time (one every 2 ms / speedup), and
-/// connects to it.
+/// connects to it. Sped up, its clock waits for a late servo command as `emulator` says
+/// (`[emulator] wait_for_client_ms`).
 pub(crate) fn start_emulator(
     home_q: [f64; 6],
     speedup: u32,
     realtime: RealtimeConfig,
+    emulator: EmulatorSection,
 ) -> crate::Result<(PacedRtde, RtdeGuard)> {
     let asked = [
         realtime.control(),
@@ -385,6 +387,7 @@ pub(crate) fn start_emulator(
             EmulatorConfig {
                 speedup,
                 clock_priority: realtime.emulator_clock(),
+                wait_for_client: emulator.wait_for_client(speedup),
                 ..EmulatorConfig::ephemeral()
             },
             Box::new(SimBackend::new(sim)),
@@ -741,8 +744,13 @@ mod tests {
     #[test]
     fn read_state_returns_while_the_tokio_runtime_is_stuck() {
         let home = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0];
-        let (mut robot, guard) =
-            start_emulator(home, 1, RealtimeConfig::default()).expect("emulator");
+        let (mut robot, guard) = start_emulator(
+            home,
+            1,
+            RealtimeConfig::default(),
+            EmulatorSection::default(),
+        )
+        .expect("emulator");
         let mut s = RobotState::default();
         robot.read_state(&mut s).expect("a first state");
         let before = s.timestamp_s;

@@ -1,6 +1,7 @@
 //! `config/trial.toml`: what a trial loads and the workspace → robot base transform.
 
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use robot_io::realtime::RtPriority;
 use serde::Deserialize;
@@ -50,6 +51,35 @@ pub struct TrialConfig {
     /// without the table).
     #[serde(default)]
     pub realtime: RealtimeConfig,
+    /// The in-process emulator (`--robot emulator`; `[emulator]`; defaults without the table).
+    #[serde(default)]
+    pub emulator: EmulatorSection,
+}
+
+/// `[emulator]`: the in-process emulator of `--robot emulator`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EmulatorSection {
+    /// At `--speedup` > 1, how long the emulator's clock waits for a late servo command
+    /// before it runs on as a controller would [ms of wall time], in [0, 1000]; 0: never waits
+    /// (`robot_io::emulator::ClientWait`). At speedup 1 it never waits, whatever this says.
+    pub wait_for_client_ms: f64,
+}
+
+impl Default for EmulatorSection {
+    fn default() -> Self {
+        Self {
+            wait_for_client_ms: 20.0,
+        }
+    }
+}
+
+impl EmulatorSection {
+    /// The wait for a clock at `speedup` (`None`: never waits).
+    pub(crate) fn wait_for_client(self, speedup: u32) -> Option<Duration> {
+        (speedup > 1 && self.wait_for_client_ms > 0.0)
+            .then(|| Duration::from_secs_f64(self.wait_for_client_ms / 1e3))
+    }
 }
 
 /// `[realtime]`: `SCHED_FIFO` priorities [-] of the threads a 2 ms control cycle waits on
@@ -273,6 +303,14 @@ impl TrialConfig {
             )
         );
         cfg.realtime.validate()?;
+        let wait = cfg.emulator.wait_for_client_ms;
+        ensure!(
+            (0.0..=1000.0).contains(&wait),
+            Error::config(
+                "emulator.wait_for_client_ms",
+                format!("must be in [0, 1000] ms, got {wait}")
+            )
+        );
         Ok(cfg)
     }
 
@@ -368,6 +406,21 @@ mod tests {
         // At the bounds: accepted.
         assert!(with("max_duration_s", "3600.0").is_ok());
         assert!(with("lead_time_s", "600.0").is_ok());
+        assert!(with("wait_for_client_ms", "1000.0").is_ok());
+        let never = with("wait_for_client_ms", "0.0").unwrap().emulator;
+        assert_eq!(never.wait_for_client(4), None, "0: the clock never waits");
+        let shipped = TrialConfig::shipped().unwrap().emulator;
+        assert_eq!(
+            shipped,
+            EmulatorSection::default(),
+            "the file states the default"
+        );
+        assert_eq!(shipped.wait_for_client(4), Some(Duration::from_millis(20)));
+        assert_eq!(
+            shipped.wait_for_client(1),
+            None,
+            "a real-time clock never waits"
+        );
         // Past them (1e20 passed validation at a077dd5): refused, naming the key and bound.
         for (key, bad, bound) in [
             ("max_duration_s", "3600.5", "3600"),
@@ -376,6 +429,9 @@ mod tests {
             ("lead_time_s", "600.5", "600"),
             ("lead_time_s", "1e20", "600"),
             ("cue_rate_hz", "1e20", "120"),
+            ("wait_for_client_ms", "1000.5", "1000"),
+            ("wait_for_client_ms", "-1.0", "[0, 1000]"),
+            ("wait_for_client_ms", "nan", "1000"),
         ] {
             let e = with(key, bad).unwrap_err().with_causes().to_string();
             assert!(e.contains(key) && e.contains(bound), "{key} = {bad}: {e}");

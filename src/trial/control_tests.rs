@@ -214,6 +214,7 @@ fn the_control_cycle_allocates_nothing_over_rtde_to_the_emulator() {
         setup.ctl_cfg.task.home_q_rad,
         10,
         Default::default(),
+        Default::default(),
     )
     .unwrap();
     // Paced by the emulator's clock (one controller cycle per 0.2 ms of wall time): until the

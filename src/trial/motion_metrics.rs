@@ -917,6 +917,9 @@ impl MotionMetrics {
                 cycles_slewed: c.cycles_slewed,
                 bursts: c.bursts,
                 holds_in_bursts: c.holds_in_bursts,
+                cycles_waited: c.cycles_waited,
+                waits: c.waits,
+                waits_timed_out: c.waits_timed_out,
             }),
             scheduling: self.scheduling.clone(),
         }
@@ -966,6 +969,13 @@ pub(crate) struct EmulatorClockSummary {
     pub(crate) bursts: u64,
     /// Servo holds that began in such a burst (the emulator late, not the client).
     pub(crate) holds_in_bursts: u64,
+    /// Cycles not run while the sped-up clock waited for a late servo command (virtual time
+    /// stood still; `[emulator] wait_for_client_ms`).
+    pub(crate) cycles_waited: u64,
+    /// Times the clock began such a wait.
+    pub(crate) waits: u64,
+    /// Waits that reached the bound: the clock then ran on as a controller's does.
+    pub(crate) waits_timed_out: u64,
 }
 
 /// `motion` in `summary.json` (README.md, "Motion quality metrics").
@@ -1602,6 +1612,9 @@ mod tests {
             cycles_slewed: 300,
             bursts: 3,
             holds_in_bursts: 1,
+            cycles_waited: 77,
+            waits: 9,
+            waits_timed_out: 2,
         });
         let json = serde_json::to_value(summary(&mut m)).unwrap();
         let c = &json["emulator_clock"];
@@ -1614,6 +1627,9 @@ mod tests {
             ("cycles_slewed", 300),
             ("bursts", 3),
             ("holds_in_bursts", 1),
+            ("cycles_waited", 77),
+            ("waits", 9),
+            ("waits_timed_out", 2),
         ] {
             assert_eq!(c[k], v, "{k}: {c}");
         }

@@ -1271,7 +1271,9 @@ fn motion_section(h: &mut String, s: &Summary) {
         let v = format!(
             "{} cycles run of {} due; {} slewed (run at 1.25 × the rate after the emulator's \
              thread ran late), {} run late in {} bursts (a backlog beyond 20 ms), {} dropped; \
-             largest backlog {} cycles; {} servo holds began in a burst",
+             largest backlog {} cycles; {} servo holds began in a burst; {} cycles not run \
+             while it waited {} times for a late servo command (virtual time stood still), {} \
+             of those waits reached the bound",
             c.cycles_run,
             c.cycles_elapsed,
             c.cycles_slewed,
@@ -1279,7 +1281,10 @@ fn motion_section(h: &mut String, s: &Summary) {
             c.bursts,
             c.cycles_dropped,
             c.max_behind_cycles,
-            c.holds_in_bursts
+            c.holds_in_bursts,
+            c.cycles_waited,
+            c.waits,
+            c.waits_timed_out
         );
         let _ = writeln!(
             h,

@@ -546,8 +546,12 @@ pub(crate) fn run_trial_with_cues(
             )
         }
         RobotChoice::Emulator { speedup } => {
-            let (robot, guard) =
-                super::backend::start_emulator(home, *speedup, spec.config.realtime)?;
+            let (robot, guard) = super::backend::start_emulator(
+                home,
+                *speedup,
+                spec.config.realtime,
+                spec.config.emulator,
+            )?;
             let out = drive(
                 spec,
                 setup,

@@ -73,6 +73,7 @@ fn run_on_emulator(
         setup.ctl_cfg.task.home_q_rad,
         10,
         spec.config.realtime,
+        spec.config.emulator,
     )?;
     let emu = guard.emulator().expect("in-process");
     let r = drive(
