@@ -70,6 +70,32 @@ fn latched(emu: &Emulator) -> Option<Joints> {
     .flatten()
 }
 
+/// A slow watchdog (1 s of virtual time) and the emulator's extrapolation bound at speedup 4
+/// (24 ms, as the trial scales it): for tests that are not about stalls.
+fn slow_watchdog_map() -> RegisterMap {
+    RegisterMap {
+        watchdog_hz: 1.0,
+        extrapolate_max_s: 0.024,
+        ..RegisterMap::default()
+    }
+}
+
+/// Sends a ramp at `v` [rad/s] on joint 0 from the next sample's joints: three servo targets,
+/// each for the cycle after the sample just read. Returns the joints it started from and the
+/// last target [rad], and the last sample in `s`.
+async fn send_ramp(robot: &mut RtdeRobot, s: &mut RobotState, v: f64) -> (Joints, Joints) {
+    robot.wait_state(s, SAMPLE_TIMEOUT).await.unwrap();
+    let (q0, t0) = (s.actual_q, s.timestamp_s);
+    let mut last = q0;
+    for _ in 0..3 {
+        robot.wait_state(s, SAMPLE_TIMEOUT).await.unwrap();
+        last = q0;
+        last[0] += v * (s.timestamp_s + 0.002 - t0);
+        robot.send(&servo(last)).unwrap();
+    }
+    (q0, last)
+}
+
 /// A ramp of three servo targets at 0.25 rad/s on joint 0, one per sample read, then
 /// nothing: the robot extrapolates the last target at the ramp's velocity up to the bound
 /// (24 ms at speedup 4, as the trial scales it) and holds q3 + 0.25·0.024 = q3 + 0.006 rad,
@@ -77,25 +103,11 @@ fn latched(emu: &Emulator) -> Option<Joints> {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_unrefreshed_ramp_target_is_extrapolated_at_the_ramp_velocity_up_to_the_bound() {
     tokio::time::timeout(TEST_TIMEOUT, async {
-        // A slow watchdog (1 s of virtual time): this test is not about stalls.
-        let map = RegisterMap {
-            watchdog_hz: 1.0,
-            extrapolate_max_s: 0.024,
-            ..RegisterMap::default()
-        };
+        let map = slow_watchdog_map();
         let (emu, mut robot) = setup(4, map).await;
         const V: f64 = 0.25;
         let mut s = RobotState::default();
-        robot.wait_state(&mut s, SAMPLE_TIMEOUT).await.unwrap();
-        let (q0, t0) = (s.actual_q, s.timestamp_s);
-        let mut last = q0;
-        for _ in 0..3 {
-            robot.wait_state(&mut s, SAMPLE_TIMEOUT).await.unwrap();
-            // The target for the cycle after this sample.
-            last = q0;
-            last[0] += V * (s.timestamp_s + 0.002 - t0);
-            robot.send(&servo(last)).unwrap();
-        }
+        let (q0, last) = send_ramp(&mut robot, &mut s, V).await;
         let held = last[0] + V * map.extrapolate_max_s;
         // Read samples until the program holds; an earlier target's hold is 0.0005 rad short.
         let mut reached = false;
@@ -132,11 +144,7 @@ async fn an_unrefreshed_ramp_target_is_extrapolated_at_the_ramp_velocity_up_to_t
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_sped_up_clock_waits_for_a_late_client_and_runs_on_after_the_bound() {
     tokio::time::timeout(TEST_TIMEOUT, async {
-        let map = RegisterMap {
-            watchdog_hz: 1.0,
-            extrapolate_max_s: 0.024,
-            ..RegisterMap::default()
-        };
+        let map = slow_watchdog_map();
         for (bound, times_out) in [
             (Duration::from_secs(30), false),
             (Duration::from_millis(50), true),
@@ -148,15 +156,7 @@ async fn a_sped_up_clock_waits_for_a_late_client_and_runs_on_after_the_bound() {
             };
             let (emu, mut robot) = setup_with(cfg, map).await;
             let mut s = RobotState::default();
-            robot.wait_state(&mut s, SAMPLE_TIMEOUT).await.unwrap();
-            let (q0, t0) = (s.actual_q, s.timestamp_s);
-            let mut target = q0;
-            for _ in 0..3 {
-                robot.wait_state(&mut s, SAMPLE_TIMEOUT).await.unwrap();
-                target = q0;
-                target[0] += 0.25 * (s.timestamp_s + 0.002 - t0);
-                robot.send(&servo(target)).unwrap();
-            }
+            let (_, mut target) = send_ramp(&mut robot, &mut s, 0.25).await;
             assert_eq!(emu.clock_stats().waits_timed_out, 0);
             // Silence: the clock begins to wait within a few cycles.
             let mut waiting = emu.clock_stats();

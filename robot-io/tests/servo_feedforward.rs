@@ -71,6 +71,13 @@ impl Bench {
         assert_eq!(self.values.len(), INT_REGISTERS + DOUBLE_REGISTERS);
     }
 
+    /// Writes `cmd` with `ff` stamped for the tick `late` cycles before the next one
+    /// ([`Bench::valid_tick`]; negative: ahead).
+    fn write_late(&mut self, cmd: &JointCommand, ff: &ServoFeedforward, late: i32) {
+        let valid_tick = self.valid_tick(late);
+        self.write(cmd, &ServoFeedforward { valid_tick, ..*ff });
+    }
+
     /// The program's tick in the published state, read as a client reads it
     /// (`output_int_register_<int_base>`).
     fn tick(&mut self) -> i32 {
@@ -533,14 +540,7 @@ fn servo_stats_count_late_commands_and_extrapolated_and_held_cycles() {
     assert_eq!((s.held_cycles, s.holds), (6, 1));
     // A command meant for 2 ticks ago: 2 cycles late, extrapolated from its arrival on
     // (δ = 4, 6 ms), then held again (a second hold).
-    let valid_tick = b.valid_tick(2);
-    b.write(
-        &servo(q),
-        &ServoFeedforward {
-            valid_tick,
-            ..moving
-        },
-    );
+    b.write_late(&servo(q), &moving, 2);
     for _ in 0..4 {
         b.step();
     }
@@ -550,14 +550,7 @@ fn servo_stats_count_late_commands_and_extrapolated_and_held_cycles() {
     assert_eq!((s.held_cycles, s.holds), (6 + 2, 2));
     // A command at rest (no feedforward) that goes stale holds nothing that moves: not
     // counted as held; one more than 16 cycles late lands in the last bin.
-    let valid_tick = b.valid_tick(40);
-    b.write(
-        &servo(q),
-        &ServoFeedforward {
-            valid_tick,
-            ..ServoFeedforward::ZERO
-        },
-    );
+    b.write_late(&servo(q), &ServoFeedforward::ZERO, 40);
     for _ in 0..5 {
         b.step();
     }
@@ -569,14 +562,7 @@ fn servo_stats_count_late_commands_and_extrapolated_and_held_cycles() {
     assert_eq!(s.early_cycles, 0);
     // A command meant for 2 ticks ahead: evaluated back on the first cycle (δ = −2 ms), on
     // time on the second; it counts as on time on arrival.
-    let valid_tick = b.valid_tick(-1);
-    b.write(
-        &servo(q),
-        &ServoFeedforward {
-            valid_tick,
-            ..moving
-        },
-    );
+    b.write_late(&servo(q), &moving, -1);
     b.step();
     b.step();
     let s = stats(&b);
@@ -693,40 +679,19 @@ fn the_program_awaits_a_command_only_when_it_would_extrapolate_a_moving_target()
     );
     // Written 3 ticks late: new, so not awaited; after the cycle that ran it (extrapolated)
     // it is awaited again.
-    let valid_tick = b.valid_tick(3);
-    b.write(
-        &servo(q),
-        &ServoFeedforward {
-            valid_tick,
-            ..moving
-        },
-    );
+    b.write_late(&servo(q), &moving, 3);
     assert!(!awaits(&b));
     b.step();
     assert!(awaits(&b));
     // A target written one tick ahead (the client predicted past a late sample): its tick
     // has not come after this cycle, so nothing would be extrapolated yet.
-    let valid_tick = b.valid_tick(-1);
-    b.write(
-        &servo(q),
-        &ServoFeedforward {
-            valid_tick,
-            ..moving
-        },
-    );
+    b.write_late(&servo(q), &moving, -1);
     b.step();
     assert!(!awaits(&b), "its own tick is the next");
     b.step();
     assert!(awaits(&b));
     // At rest: nothing to extrapolate, nothing awaited, however stale.
-    let valid_tick = b.valid_tick(0);
-    b.write(
-        &servo(q),
-        &ServoFeedforward {
-            valid_tick,
-            ..ServoFeedforward::ZERO
-        },
-    );
+    b.write_late(&servo(q), &ServoFeedforward::ZERO, 0);
     for _ in 0..5 {
         b.step();
         assert!(!awaits(&b));

@@ -390,19 +390,20 @@ mod tests {
         assert!((q[0] - 0.3).abs() < 1e-12 && (q[1] + 0.2).abs() < 1e-12);
     }
 
+    /// The shipped config with `key = value` in place of its line for `key`.
+    fn with(key: &str, value: &str) -> crate::Result<TrialConfig> {
+        let line = SHIPPED_TOML
+            .lines()
+            .find(|l| l.starts_with(&format!("{key} = ")))
+            .unwrap_or_else(|| panic!("{key} is in the shipped config"));
+        TrialConfig::from_toml_str(
+            &SHIPPED_TOML.replace(line, &format!("{key} = {value}")),
+            Path::new("/cfg"),
+        )
+    }
+
     #[test]
     fn durations_are_bounded_and_the_error_names_the_key() {
-        let dir = Path::new("/cfg");
-        let with = |key: &str, value: &str| {
-            let line = SHIPPED_TOML
-                .lines()
-                .find(|l| l.starts_with(&format!("{key} = ")))
-                .unwrap_or_else(|| panic!("{key} is in the shipped config"));
-            TrialConfig::from_toml_str(
-                &SHIPPED_TOML.replace(line, &format!("{key} = {value}")),
-                dir,
-            )
-        };
         // At the bounds: accepted.
         assert!(with("max_duration_s", "3600.0").is_ok());
         assert!(with("lead_time_s", "600.0").is_ok());
@@ -440,7 +441,6 @@ mod tests {
 
     #[test]
     fn realtime_priorities_are_0_or_1_to_99_and_the_error_names_the_key() {
-        let dir = Path::new("/cfg");
         let shipped = TrialConfig::shipped().unwrap().realtime;
         assert_eq!(
             shipped,
@@ -456,16 +456,6 @@ mod tests {
             ),
             (None, None, None)
         );
-        let with = |key: &str, value: &str| {
-            let line = SHIPPED_TOML
-                .lines()
-                .find(|l| l.starts_with(&format!("{key} = ")))
-                .unwrap_or_else(|| panic!("{key} is in the shipped config"));
-            TrialConfig::from_toml_str(
-                &SHIPPED_TOML.replace(line, &format!("{key} = {value}")),
-                dir,
-            )
-        };
         for key in [
             "control_priority",
             "rtde_io_priority",
