@@ -2313,6 +2313,13 @@ async fn serve_dashboard(
                 if w.write_all(format!("{reply}\n").as_bytes()).await.is_err() || quit {
                     break;
                 }
+                // One line, then the other tasks' turn: lines already buffered are read without
+                // touching the socket, so a client streaming lines would keep a worker until
+                // tokio's budget of socket operations ran out. With four clients streaming
+                // garbage lines (BENCHMARKS.md, "The emulator under hostile clients"), a
+                // well-behaved client's 200 round trips took at worst 4.8–6.7 × their quiet
+                // time with this yield (three runs), 10.7 and 12 × without it (two runs).
+                tokio::task::yield_now().await;
             }
         });
     }
