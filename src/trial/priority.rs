@@ -24,7 +24,7 @@
 pub(crate) fn warn_if_refused(what: &str, got: &Scheduling) {
     if let Scheduling::Refused { .. } = got {
         tracing::warn!(
-            "{what}: {got}; the control cycle may then miss samples under load (README \"Real-time scheduling\")"
+            "{what}: {got}; the control cycle may then miss samples under load (README, \"Real-time priorities\")"
         );
     }
 }
