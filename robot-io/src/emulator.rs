@@ -546,6 +546,14 @@ struct ServoInForce {
     sent: Option<Joints>,
 }
 
+impl ServoInForce {
+    /// Whether the target moves: a joint velocity in its (clamped) feedforward. A target at
+    /// rest is never extrapolated, so it is neither held nor awaited.
+    fn moving(&self) -> bool {
+        self.feedforward.clamped().qd.iter().any(|v| *v != 0.0)
+    }
+}
+
 impl SimBackend {
     /// Wraps `robot`; its program is stopped until our control program arrives.
     pub fn new(mut robot: SimRobot) -> Self {
@@ -691,7 +699,7 @@ impl SimBackend {
         };
         let since_s = servo.feedforward.since_valid_s(self.tick, CYCLE_S);
         let st = &mut self.servo_stats;
-        let moving = servo.feedforward.clamped().qd.iter().any(|v| *v != 0.0);
+        let moving = servo.moving();
         // A small tolerance: since_s is a whole number of cycles × 2 ms.
         let held = moving && since_s > extrapolate_max_s + 1e-9;
         if held {
@@ -728,9 +736,8 @@ impl EmulatorBackend for SimBackend {
         let (Some(map), Some(servo)) = (self.program, &self.servo) else {
             return false;
         };
-        let moving = servo.feedforward.clamped().qd.iter().any(|v| *v != 0.0);
         let seq = inputs.int.get(usize::from(map.int_base) + 1).copied();
-        moving
+        servo.moving()
             && seq == self.last_seq
             && servo
                 .feedforward

@@ -96,7 +96,6 @@ impl EmulatorSection {
 /// reported 1 s of trial time; with the priorities at 0 they pass).
 /// Refused by the OS (no `CAP_SYS_NICE`, `RLIMIT_RTPRIO` too low), a thread runs at normal
 /// priority, a warning says so and `summary.json`'s `motion.scheduling` records it.
-/// The default is every priority 0.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RealtimeConfig {

@@ -54,8 +54,8 @@ fn test_log(dir: &Path, participant: &str) -> TrialLog {
 }
 
 /// Runs control cycles of handovers on `robot` until `enough` says so, `cycles` at most;
-/// `mock` takes trial time from the cycle count and logs straight into the trial log (the simulated robot: the lockstep path);
-/// otherwise time is the robot's clock, each cycle also exchanges with the cue handoffs, and it
+/// `mock` takes trial time from the cycle count and logs straight into the trial log (the
+/// simulated robot: the lockstep path); otherwise time is the robot's clock, each cycle also exchanges with the cue handoffs, and it
 /// logs into a [`ControlLog`] that the trial log absorbs between cycles (RTDE: the control
 /// thread's path).
 fn run_handovers<R: TrialRobot>(
