@@ -45,6 +45,9 @@ use crate::{Result, RobotIoError};
 
 #[path = "sim_fields.rs"]
 pub mod sim_fields;
+#[path = "dashboard_budget.rs"]
+pub mod dashboard_budget;
+use dashboard_budget::{LineBudget, MAX_DASHBOARD_CONNECTIONS};
 use sim_fields::{IoEcho, SimFields};
 
 /// Controller cycle \[s\].
@@ -2279,13 +2282,33 @@ async fn serve_dashboard(
     world: Arc<Mutex<World>>,
     paused: watch::Receiver<bool>,
 ) {
+    // Shared by every connection: a per-connection budget does not bound a client that
+    // reconnects (see `dashboard_budget`).
+    let budget = Arc::new(Mutex::new(LineBudget::default()));
+    let open = Arc::new(tokio::sync::Semaphore::new(MAX_DASHBOARD_CONNECTIONS));
     loop {
-        let Ok((stream, _)) = listener.accept().await else {
+        let Ok((mut stream, _)) = listener.accept().await else {
+            continue;
+        };
+        let Ok(permit) = open.clone().try_acquire_owned() else {
+            tracing::debug!("emulator: dashboard connection refused: {MAX_DASHBOARD_CONNECTIONS} open");
+            tokio::spawn(async move {
+                let reply = format!(
+                    "Too many dashboard connections ({MAX_DASHBOARD_CONNECTIONS} open); closing\n"
+                );
+                let _ = tokio::time::timeout(
+                    Duration::from_millis(100),
+                    stream.write_all(reply.as_bytes()),
+                )
+                .await;
+            });
             continue;
         };
         let world = world.clone();
+        let budget = budget.clone();
         let mut paused = paused.clone();
         tokio::spawn(async move {
+            let _open = permit;
             running(&mut paused).await;
             let (r, mut w) = stream.into_split();
             let mut r = BufReader::new(r);
@@ -2312,6 +2335,7 @@ async fn serve_dashboard(
                         if !ended && skip_dashboard_line(&mut r).await.is_err() {
                             break;
                         }
+                        pipelined_wait(&r, &budget).await;
                         continue;
                     }
                     Ok(DashboardLine::Eof) | Err(_) => break,
@@ -2327,8 +2351,26 @@ async fn serve_dashboard(
                 // well-behaved client's 200 round trips took at worst 4.8–6.7 × their quiet
                 // time with this yield (three runs), 10.7 and 12 × without it (two runs).
                 tokio::task::yield_now().await;
+                pipelined_wait(&r, &budget).await;
             }
         });
+    }
+}
+
+/// When the client's next line is already buffered (it was sent before the reply to the last
+/// one was read: pipelined), waits for a token of the shared [`LineBudget`]. Meanwhile the
+/// socket is not read, so a flooding client is held back by TCP's flow control; a
+/// request/reply client, whose buffer is empty after each line, never waits here.
+async fn pipelined_wait<R: tokio::io::AsyncRead>(r: &BufReader<R>, budget: &Mutex<LineBudget>) {
+    if r.buffer().is_empty() {
+        return;
+    }
+    loop {
+        let wait = lock(budget).take(Instant::now());
+        match wait {
+            None => return,
+            Some(d) => tokio::time::sleep(d).await,
+        }
     }
 }
 
