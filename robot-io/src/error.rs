@@ -141,6 +141,19 @@ pub enum RobotIoError {
         reply: String,
     },
 
+    // --- the ur_rtde backend (feature `ur-rtde`) ---
+    /// A ur_rtde call failed: it threw a C++ exception (caught in our shim, its message
+    /// kept) or returned false. Building it allocates the message (an error path only).
+    #[error("ur_rtde {call} failed (status {status}): {message}")]
+    UrRtde {
+        /// The ur_rtde call, e.g. `RTDEControlInterface::servoJ`.
+        call: &'static str,
+        /// The shim's status code (negative).
+        status: i32,
+        /// ur_rtde's message.
+        message: String,
+    },
+
     // --- simulation and traces ---
     /// A trace file could not be parsed; names the file, the 1-based line and the 1-based column
     /// (field number, counting every column of the file).

@@ -6,6 +6,8 @@
 //! - [`Robot`]: one control cycle's `read_state` and `send`, with three implementations:
 //!   [`RtdeRobot`] (a real UR5e or URSim over RTDE), [`sim::SimRobot`] (an in-process UR5e
 //!   model on a mock clock, with fault injection) and [`replay::ReplayRobot`] (a recorded trace).
+//! - `UrRtdeRobot` (feature `ur-rtde`, module `ur_rtde_robot`): the same [`Robot`] over SDU's
+//!   ur_rtde 1.6.5 (its RTDEReceiveInterface and RTDEControlInterface) through our C shim.
 //! - [`codec`]: every RTDE package and field type, with recipes built once and decoding into
 //!   caller-owned buffers; [`RtdeClient`]: the tokio client (protocol v2, recipes, a reader task
 //!   that always drains the socket, link-loss detection and reconnect with backoff).
@@ -60,6 +62,10 @@ pub use client::{ClientConfig, RtdeClient};
 pub use dashboard::DashboardClient;
 pub use emulator::{Emulator, EmulatorBackend, EmulatorConfig, SimBackend, TraceBackend};
 pub use rtde_robot::{RtdeRobot, RtdeRobotConfig};
+#[cfg(feature = "ur-rtde")]
+pub mod ur_rtde_robot;
+#[cfg(feature = "ur-rtde")]
+pub use ur_rtde_robot::{UrRtdeConfig, UrRtdeReceiver, UrRtdeRobot};
 pub use script::{RegisterMap, ScriptSender};
 
 // --- kinematics (UR5e FK and Jacobians; used by sim, adapt and safety) ---

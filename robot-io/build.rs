@@ -1,0 +1,63 @@
+//! Build script: under the `ur-rtde` feature, compiles the C shim over ur_rtde 1.6.5
+//! (`ffi/ur_rtde_shim.cpp`) and links the wheel's `librtde.so`. Without the feature it does
+//! nothing.
+//!
+//! Inputs, set by `scripts/deps/env.sh` after `scripts/setup`:
+//! - `UR_RTDE_INCLUDE`: the sdist's `include/` (holds `ur_rtde/` and `urcl/`);
+//! - `UR_RTDE_LIB_DIR`: the directory of `librtde.so.1.6.5` (the PyPI wheel's site-packages);
+//! - Boost's headers from Debian's `libboost-dev` (`/usr/include`).
+
+fn main() {
+    println!("cargo:rerun-if-changed=build.rs");
+    if std::env::var_os("CARGO_FEATURE_UR_RTDE").is_none() {
+        return;
+    }
+    println!("cargo:rerun-if-changed=ffi/ur_rtde_shim.cpp");
+    println!("cargo:rerun-if-changed=ffi/ur_rtde_shim.h");
+    println!("cargo:rerun-if-changed=ffi/include/ur_rtde/rtde_export.h");
+    println!("cargo:rerun-if-env-changed=UR_RTDE_INCLUDE");
+    println!("cargo:rerun-if-env-changed=UR_RTDE_LIB_DIR");
+
+    let need = |var: &str| -> std::path::PathBuf {
+        match std::env::var_os(var) {
+            Some(v) if !v.is_empty() => std::path::PathBuf::from(v),
+            _ => panic!(
+                "robot-io feature `ur-rtde`: {var} is not set. Run scripts/setup (it installs \
+                 ur_rtde 1.6.5's headers, the wheel's librtde.so and libboost-dev), then \
+                 `source scripts/deps/env.sh`."
+            ),
+        }
+    };
+    let include = need("UR_RTDE_INCLUDE");
+    let lib_dir = need("UR_RTDE_LIB_DIR");
+    if !include.join("ur_rtde/rtde_receive_interface.h").is_file() {
+        panic!(
+            "robot-io feature `ur-rtde`: {} has no ur_rtde/rtde_receive_interface.h (UR_RTDE_INCLUDE)",
+            include.display()
+        );
+    }
+    if !lib_dir.join("librtde.so.1.6.5").is_file() {
+        panic!(
+            "robot-io feature `ur-rtde`: {} has no librtde.so.1.6.5 (UR_RTDE_LIB_DIR)",
+            lib_dir.display()
+        );
+    }
+
+    cc::Build::new()
+        .cpp(true)
+        .std("c++17")
+        // The wheel's librtde.so is built on manylinux2014 with the old libstdc++ string ABI.
+        .define("_GLIBCXX_USE_CXX11_ABI", "0")
+        .include("ffi/include")
+        .include("ffi")
+        .include(&include)
+        .warnings(false)
+        .file("ffi/ur_rtde_shim.cpp")
+        .compile("hrc_ur_rtde_shim");
+
+    println!("cargo:rustc-link-search=native={}", lib_dir.display());
+    println!("cargo:rustc-link-lib=dylib=rtde");
+    println!("cargo:rustc-link-lib=dylib=stdc++");
+    // Binaries and tests find the library at run time without LD_LIBRARY_PATH.
+    println!("cargo:rustc-link-arg=-Wl,-rpath,{}", lib_dir.display());
+}
