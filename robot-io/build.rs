@@ -17,6 +17,7 @@ fn main() {
     println!("cargo:rerun-if-changed=ffi/include/ur_rtde/rtde_export.h");
     println!("cargo:rerun-if-env-changed=UR_RTDE_INCLUDE");
     println!("cargo:rerun-if-env-changed=UR_RTDE_LIB_DIR");
+    println!("cargo:rerun-if-env-changed=OBJCOPY");
 
     let need = |var: &str| -> std::path::PathBuf {
         match std::env::var_os(var) {
@@ -54,6 +55,31 @@ fn main() {
         .warnings(false)
         .file("ffi/ur_rtde_shim.cpp")
         .compile("hrc_ur_rtde_shim");
+
+    // The wheel's librtde.so carries its own static Boost, of another version than Debian's
+    // headers. The shim's copies of Boost's inline functions (weak, default visibility: Boost
+    // marks its error classes visible) would be exported from our binaries, and the dynamic
+    // linker would bind librtde's own calls to them: ur_rtde's receive thread then crashed in
+    // boost::system::system_error::what on link loss (seen in the link-loss test). So every
+    // symbol of the shim except its C entry points is made local.
+    let out =
+        std::path::PathBuf::from(std::env::var_os("OUT_DIR").expect("OUT_DIR is set by cargo"));
+    let archive = out.join("libhrc_ur_rtde_shim.a");
+    let status =
+        std::process::Command::new(std::env::var("OBJCOPY").unwrap_or_else(|_| "objcopy".into()))
+            .arg("--wildcard")
+            .arg("--keep-global-symbol=urs_*")
+            .arg(&archive)
+            .status()
+            .unwrap_or_else(|e| {
+                panic!("robot-io feature `ur-rtde`: running objcopy (binutils): {e}")
+            });
+    if !status.success() {
+        panic!(
+            "robot-io feature `ur-rtde`: objcopy failed on {}",
+            archive.display()
+        );
+    }
 
     println!("cargo:rustc-link-search=native={}", lib_dir.display());
     println!("cargo:rustc-link-lib=dylib=rtde");

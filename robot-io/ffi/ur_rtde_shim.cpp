@@ -1,7 +1,9 @@
 // hrc-adapt's C shim over ur_rtde 1.6.5: see ur_rtde_shim.h. Every entry point catches every
 // exception; a message is kept in the handle (a fixed buffer, so recording it allocates no
 // more than what() did).
+#pragma GCC visibility push(default)
 #include "ur_rtde_shim.h"
+#pragma GCC visibility pop
 
 #include <ur_rtde/rtde_control_interface.h>
 #include <ur_rtde/rtde_receive_interface.h>

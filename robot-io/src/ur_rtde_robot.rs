@@ -115,8 +115,11 @@ mod ffi {
             acc: f64,
             time_s: f64,
         ) -> c_int;
-        pub(super) fn urs_control_stop_j(h: *mut UrsControl, decel: f64, asynchronous: c_int)
-        -> c_int;
+        pub(super) fn urs_control_stop_j(
+            h: *mut UrsControl,
+            decel: f64,
+            asynchronous: c_int,
+        ) -> c_int;
         pub(super) fn urs_control_init_period(h: *mut UrsControl, t_start_ns: *mut i64) -> c_int;
         pub(super) fn urs_control_wait_period(h: *mut UrsControl, t_start_ns: i64) -> c_int;
         pub(super) fn urs_control_is_connected(h: *mut UrsControl) -> c_int;
@@ -228,11 +231,15 @@ impl UrRtdeReceiver {
         // SAFETY: `host` is a valid C string for the call; `err` is a writable buffer of the
         // length passed. The shim catches every exception.
         let h = unsafe {
-            ffi::urs_receive_new(host.as_ptr(), config.frequency_hz, err.as_mut_ptr(), err.len())
+            ffi::urs_receive_new(
+                host.as_ptr(),
+                config.frequency_hz,
+                err.as_mut_ptr(),
+                err.len(),
+            )
         };
-        let h = NonNull::new(h).ok_or_else(|| {
-            construct_error("RTDEReceiveInterface()", &config.host, &err)
-        })?;
+        let h = NonNull::new(h)
+            .ok_or_else(|| construct_error("RTDEReceiveInterface()", &config.host, &err))?;
         Ok(Self {
             h,
             raw: ffi::UrsState::default(),

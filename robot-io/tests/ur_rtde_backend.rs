@@ -1,0 +1,215 @@
+//! The ur_rtde backend (feature `ur-rtde`) against the emulator over loopback.
+//!
+//! ur_rtde's ports are fixed (RTDE 30004, dashboard 29999, script 30002/30003), so each test
+//! binds its emulator to its own loopback address (127.0.0.0/8 all reaches this host on
+//! Linux). Timeouts only bound a wait; no assertion depends on wall-clock speed.
+
+use std::net::{IpAddr, Ipv4Addr};
+use std::time::{Duration, Instant};
+
+use robot_io::emulator::{Emulator, EmulatorConfig, SimBackend};
+use robot_io::sim::{SimConfig, SimRobot};
+use robot_io::{
+    JointCommand, Robot, RobotIoError, RobotState, UrRtdeConfig, UrRtdeReceiver, UrRtdeRobot,
+    robot_mode, safety_mode,
+};
+
+/// Every wait is bounded by this.
+const WAIT: Duration = Duration::from_secs(20);
+
+/// An emulator with ur_rtde's fixed ports on 127.0.0.`last`, over a simulated UR5e.
+fn emulator(rt: &tokio::runtime::Runtime, last: u8) -> Emulator {
+    let cfg = EmulatorConfig {
+        bind: IpAddr::V4(Ipv4Addr::new(127, 0, 0, last)),
+        rtde_port: 30004,
+        dashboard_port: 29999,
+        secondary_port: 30002,
+        realtime_port: 30003,
+        ..EmulatorConfig::default()
+    };
+    let robot = SimRobot::new(SimConfig::ur5e()).unwrap();
+    rt.block_on(Emulator::start(cfg, Box::new(SimBackend::new(robot))))
+        .unwrap()
+}
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap()
+}
+
+/// Reads until `pred` holds for a state, or `WAIT` passes (then panics with the last state).
+fn read_until(
+    rx: &mut UrRtdeReceiver,
+    what: &str,
+    mut pred: impl FnMut(&RobotState) -> bool,
+) -> RobotState {
+    let mut s = RobotState::default();
+    let end = Instant::now() + WAIT;
+    loop {
+        rx.read(&mut s).unwrap();
+        if pred(&s) {
+            return s;
+        }
+        assert!(
+            Instant::now() < end,
+            "{what}: not seen in {WAIT:?}; last {s:?}"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+#[test]
+fn receive_reads_the_emulated_state() {
+    let rt = runtime();
+    let emu = emulator(&rt, 2);
+    let mut rx = UrRtdeReceiver::connect(&UrRtdeConfig::new("127.0.0.2")).unwrap();
+    assert!(rx.is_connected());
+    let first = read_until(&mut rx, "a sample", |s| s.timestamp_s > 0.0);
+    let later = read_until(&mut rx, "a later sample", |s| {
+        s.timestamp_s > first.timestamp_s
+    });
+    assert!(later.timestamp_s > first.timestamp_s);
+    // The simulated arm rests at its home pose: ur_rtde reads what the emulator publishes.
+    let published = emu.with_backend(|b| {
+        b.as_any_mut()
+            .downcast_mut::<SimBackend>()
+            .map(|sb| *sb.published())
+    });
+    let home = SimConfig::ur5e().initial_q_rad;
+    for (j, (got, want)) in later.actual_q.iter().zip(home).enumerate() {
+        assert!((got - want).abs() < 1e-9, "joint {j}: {got} vs home {want}");
+    }
+    if let Some(p) = published {
+        assert_eq!(p.actual_q, later.actual_q);
+    }
+    assert_eq!(later.robot_mode, robot_mode::RUNNING);
+    assert_eq!(later.safety_mode, safety_mode::NORMAL);
+    assert!(!later.is_safety_stopped());
+    drop(rx);
+    emu.shutdown();
+}
+
+#[test]
+fn nothing_listening_is_connection_refused() {
+    // 127.0.0.9 has no emulator (no other test uses it).
+    match UrRtdeReceiver::connect(&UrRtdeConfig::new("127.0.0.9")) {
+        Err(RobotIoError::ConnectionRefused { addr }) => assert!(addr.contains("127.0.0.9")),
+        Err(e) => panic!("expected ConnectionRefused, got {e}"),
+        Ok(_) => panic!("connected to nothing"),
+    }
+}
+
+#[test]
+fn bad_config_is_an_error_not_a_crash() {
+    let mut cfg = UrRtdeConfig::new("127.0.0.9");
+    cfg.frequency_hz = f64::NAN;
+    assert!(matches!(
+        UrRtdeReceiver::connect(&cfg),
+        Err(RobotIoError::InvalidConfig { .. })
+    ));
+    let cfg = UrRtdeConfig::new("127.0.0.9\0x");
+    assert!(matches!(
+        UrRtdeReceiver::connect(&cfg),
+        Err(RobotIoError::InvalidConfig { .. })
+    ));
+}
+
+#[test]
+fn link_loss_is_an_error() {
+    let rt = runtime();
+    let emu = emulator(&rt, 3);
+    let mut rx = UrRtdeReceiver::connect(&UrRtdeConfig::new("127.0.0.3")).unwrap();
+    read_until(&mut rx, "a sample", |s| s.timestamp_s > 0.0);
+    emu.shutdown();
+    drop(emu);
+    drop(rt);
+    let mut s = RobotState::default();
+    let end = Instant::now() + WAIT;
+    let err = loop {
+        match rx.read(&mut s) {
+            Ok(()) => {
+                assert!(
+                    Instant::now() < end,
+                    "the link loss was not reported in {WAIT:?}"
+                );
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            Err(e) => break e,
+        }
+    };
+    assert!(
+        matches!(
+            err,
+            RobotIoError::LinkDown { .. } | RobotIoError::UrRtde { .. }
+        ),
+        "{err}"
+    );
+    assert!(!rx.is_connected());
+}
+
+#[test]
+fn protective_stop_is_seen() {
+    let rt = runtime();
+    let emu = emulator(&rt, 4);
+    let mut rx = UrRtdeReceiver::connect(&UrRtdeConfig::new("127.0.0.4")).unwrap();
+    let s = read_until(&mut rx, "a sample", |s| s.timestamp_s > 0.0);
+    assert!(!s.is_safety_stopped());
+    let injected = emu.with_backend(|b| {
+        b.as_any_mut()
+            .downcast_mut::<SimBackend>()
+            .map(|sb| sb.robot_mut().inject_protective_stop())
+            .is_some()
+    });
+    assert!(injected, "the backend is a SimBackend");
+    let s = read_until(
+        &mut rx,
+        "the protective stop",
+        RobotState::is_safety_stopped,
+    );
+    assert_eq!(s.safety_mode, safety_mode::PROTECTIVE_STOP);
+    drop(rx);
+    emu.shutdown();
+}
+
+/// Needs the emulator to run ur_rtde's control script (RTDEControlInterface's upload and
+/// register protocol); until then RTDEControlInterface's constructor fails against it (measured:
+/// `UrRtde { call: "RTDEControlInterface()", message: "ur_rtde: Failed to start control script,
+/// before timeout of 5 seconds" }`). Run it with `--ignored` once the emulator serves it.
+#[test]
+#[ignore = "the emulator does not run ur_rtde's control script yet"]
+fn servo_j_moves_the_emulated_arm() {
+    let rt = runtime();
+    let emu = emulator(&rt, 5);
+    let mut robot = UrRtdeRobot::connect(&UrRtdeConfig::new("127.0.0.5")).unwrap();
+    assert!(robot.is_connected());
+    let mut s = RobotState::default();
+    robot.read_state(&mut s).unwrap();
+    let mut target = s.actual_q;
+    target[0] += 0.05;
+    let end = Instant::now() + WAIT;
+    loop {
+        let t = robot.init_period().unwrap();
+        robot
+            .send(&JointCommand::Servo {
+                q: target,
+                lookahead_s: 0.1,
+                gain: 300.0,
+            })
+            .unwrap();
+        robot.read_state(&mut s).unwrap();
+        if (s.actual_q[0] - target[0]).abs() < 1e-3 {
+            break;
+        }
+        assert!(
+            Instant::now() < end,
+            "servoJ did not reach the target: {s:?}"
+        );
+        robot.wait_period(t).unwrap();
+    }
+    robot.send(&JointCommand::Stop { decel: 2.0 }).unwrap();
+    drop(robot);
+    emu.shutdown();
+}
