@@ -20,7 +20,7 @@ Prints a Markdown table for BENCHMARKS.md. A measurement, not a test: it asserts
 time and judges nothing; the caller reads the figures. Every load is on 127.0.0.1 only, bounded
 in count and time, and stops by itself.
 
-    scripts/bench/emulator_hostile.py [--bin target/release/hrc-adapt] [--only LOAD ...]
+    scripts/bench/emulator_hostile.py [--bin target/release/hrc-adapt] [--only LOAD ...] [--sink] [--pin]
 """
 
 import argparse
@@ -123,8 +123,9 @@ def memory_kib(pid):
 class Load:
     """The hostile clients, each a thread that stops at `deadline` (monotonic)."""
 
-    def __init__(self, rtde, dash, seconds, only=None):
+    def __init__(self, rtde, dash, seconds, only=None, sink=None):
         self.rtde, self.dash = rtde, dash
+        self.sink = sink  # --sink: the garbage goes to a discard server instead
         self.only = only
         self.deadline = time.monotonic() + seconds
         self.counts = {"garbage bytes": 0, "oversized": 0, "connects": 0, "stalled": 0, "long line bytes": 0}
@@ -209,9 +210,9 @@ class Load:
         on = lambda name: self.only is None or name in self.only  # noqa: E731
         for _ in range(4):
             if on("garbage-rtde"):
-                self.spawn(self.garbage, self.rtde)
+                self.spawn(self.garbage, self.sink or self.rtde)
             if on("garbage-dashboard"):
-                self.spawn(self.garbage, self.dash)
+                self.spawn(self.garbage, self.sink or self.dash)
             if on("oversized"):
                 self.spawn(self.oversized)
         if on("connects"):
@@ -228,13 +229,35 @@ class Load:
             s.close()
 
 
-def run_load(rtde, dash, seconds, only, out):
+def run_load(rtde, dash, seconds, only, out, sink=None, cpus=None):
     """The whole load in a process of its own (its threads share one GIL, the timed jobs must
     not: Python's 5 ms GIL switch interval would be measured as the emulator's latency)."""
-    load = Load(rtde, dash, seconds, only)
+    if cpus is not None:
+        os.sched_setaffinity(0, cpus)
+    load = Load(rtde, dash, seconds, only, sink)
     load.start()
     load.join()
     out.put((load.counts, load.errors))
+
+
+def discard_server(sock):
+    """Reads and drops whatever each client sends, until it closes (the --sink control)."""
+    def serve(c):
+        with c:
+            while c.recv(1 << 16):
+                pass
+    while True:
+        c, _ = sock.accept()
+        threading.Thread(target=serve, args=(c,), daemon=True).start()
+
+
+def start_sink():
+    sock = socket.socket()
+    sock.bind((HOST, 0))
+    sock.listen(64)
+    p = multiprocessing.Process(target=discard_server, args=(sock,), daemon=True)
+    p.start()
+    return p, sock.getsockname()[1]
 
 
 def start_emulator(binary):
@@ -257,7 +280,22 @@ def main():
     ap.add_argument("--only", nargs="+", choices=["garbage-rtde", "garbage-dashboard", "oversized",
                                                   "connects", "stalled", "long-line"],
                     help="run only these loads (default: all at once)")
+    ap.add_argument("--sink", action="store_true",
+                    help="control run: the garbage senders send to a discard server of their own (another "
+                         "process) instead of the emulator, so only their CPU use competes")
+    ap.add_argument("--pin", action="store_true",
+                    help="the emulator and the timed jobs on the first CPU, the load on the others, in "
+                         "every phase: the load's own CPU use then does not compete with the emulator")
     args = ap.parse_args()
+    sink_proc, sink = start_sink() if args.sink else (None, None)
+    load_cpus = None
+    if args.pin:
+        # The emulator (inherits this) and the timed jobs on CPU 0, the load on the others.
+        cpus = sorted(os.sched_getaffinity(0))
+        if len(cpus) < 2:
+            sys.exit("--pin needs two CPUs")
+        os.sched_setaffinity(0, {cpus[0]})
+        load_cpus = set(cpus[1:])
     emu, rtde, dash = start_emulator(args.bin)
     try:
         time.sleep(1.0)
@@ -268,7 +306,7 @@ def main():
             rows.append(("quiet", i + 1, t, gap, dashboard_job(dash)))
         mem_quiet = memory_kib(emu.pid)
         results = multiprocessing.Queue()
-        loader = multiprocessing.Process(target=run_load, args=(rtde, dash, 20.0, args.only, results))
+        loader = multiprocessing.Process(target=run_load, args=(rtde, dash, 20.0, args.only, results, sink, load_cpus))
         deadline = time.monotonic() + 20.0
         loader.start()
         peak = mem_quiet
@@ -289,6 +327,9 @@ def main():
     finally:
         emu.terminate()
         emu.wait(timeout=10)
+        if sink_proc is not None:
+            sink_proc.terminate()
+            sink_proc.join(timeout=10)
 
     quiet = [r for r in rows if r[0] == "quiet"]
     hostile = [r for r in rows if r[0] == "hostile"]
