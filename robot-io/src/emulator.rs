@@ -43,10 +43,10 @@ use crate::trace::Trace;
 use crate::types::{JointCommand, Joints, Robot, RobotState};
 use crate::{Result, RobotIoError};
 
-#[path = "sim_fields.rs"]
-pub mod sim_fields;
 #[path = "dashboard_budget.rs"]
 pub mod dashboard_budget;
+#[path = "sim_fields.rs"]
+pub mod sim_fields;
 use dashboard_budget::{LineBudget, MAX_DASHBOARD_CONNECTIONS};
 use sim_fields::{IoEcho, SimFields};
 
@@ -2291,7 +2291,9 @@ async fn serve_dashboard(
             continue;
         };
         let Ok(permit) = open.clone().try_acquire_owned() else {
-            tracing::debug!("emulator: dashboard connection refused: {MAX_DASHBOARD_CONNECTIONS} open");
+            tracing::debug!(
+                "emulator: dashboard connection refused: {MAX_DASHBOARD_CONNECTIONS} open"
+            );
             tokio::spawn(async move {
                 let reply = format!(
                     "Too many dashboard connections ({MAX_DASHBOARD_CONNECTIONS} open); closing\n"
