@@ -9,9 +9,14 @@
 
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
-    if std::env::var_os("CARGO_FEATURE_UR_RTDE").is_none() {
-        return;
-    }
+    #[cfg(feature = "ur-rtde")]
+    ur_rtde();
+}
+
+/// Compiles the shim and links librtde (feature `ur-rtde`; `cc` is a build dependency only
+/// then).
+#[cfg(feature = "ur-rtde")]
+fn ur_rtde() {
     println!("cargo:rerun-if-changed=ffi/ur_rtde_shim.cpp");
     println!("cargo:rerun-if-changed=ffi/ur_rtde_shim.h");
     println!("cargo:rerun-if-changed=ffi/include/ur_rtde/rtde_export.h");
