@@ -26,7 +26,9 @@
 //!   which does not wait for the arm to stop.
 //! - **Allocation.** ur_rtde's getters return `std::vector<double>` by value and look fields
 //!   up by `std::string` name, so **each `read_state` allocates on the C++ heap** (six vectors
-//!   and the name strings that do not fit the small-string buffer). servoJ takes a vector,
+//!   and the name strings that do not fit the small-string buffer). Measured: 20 `malloc`
+//!   calls per read on the reading thread (1000 reads against `hrc-adapt emulate --sim`,
+//!   `robot-io/ffi/tools/alloc_count.c`, a malloc-interposing program). servoJ takes a vector,
 //!   which the shim reuses, but ur_rtde builds its input package in vectors as well. Rust's
 //!   counting allocator does not see C++ `malloc`; this backend does not meet the crate's
 //!   no-allocation rule, unlike [`crate::RtdeRobot`].
