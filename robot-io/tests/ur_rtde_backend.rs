@@ -82,9 +82,8 @@ fn receive_reads_the_emulated_state() {
     for (j, (got, want)) in later.actual_q.iter().zip(home).enumerate() {
         assert!((got - want).abs() < 1e-9, "joint {j}: {got} vs home {want}");
     }
-    if let Some(p) = published {
-        assert_eq!(p.actual_q, later.actual_q);
-    }
+    let published = published.expect("the backend is a SimBackend");
+    assert_eq!(published.actual_q, later.actual_q);
     assert_eq!(later.robot_mode, robot_mode::RUNNING);
     assert_eq!(later.safety_mode, safety_mode::NORMAL);
     assert!(!later.is_safety_stopped());
