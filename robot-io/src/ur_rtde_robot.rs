@@ -207,13 +207,13 @@ unsafe fn message(p: *const c_char) -> String {
 /// ur_rtde's RTDEReceiveInterface alone: reads the state, commands nothing. For `record`,
 /// the benchmarks, and inside [`UrRtdeRobot`].
 ///
-/// Owns its handle (freed on drop); `!Sync` and `!Send`: ur_rtde's interface is used by the
-/// thread that built it.
+/// Owns its handle (freed on drop). `Send` (the trial's control thread owns it) but `!Sync`:
+/// the shim's handle is used by one thread at a time.
 #[derive(Debug)]
 pub struct UrRtdeReceiver {
     h: NonNull<ffi::UrsReceive>,
     raw: ffi::UrsState,
-    _not_sync: PhantomData<*mut ()>,
+    _not_sync: PhantomData<std::cell::Cell<()>>,
 }
 
 impl std::fmt::Debug for ffi::UrsState {
@@ -312,6 +312,15 @@ impl UrRtdeReceiver {
     }
 }
 
+// SAFETY: the handle is owned exclusively (no copies, `!Sync` through the Cell marker), so moving
+// it to another thread hands over every use; ur_rtde's interface has no thread affinity (its own
+// receive thread synchronises with any caller through its state mutex).
+unsafe impl Send for UrRtdeReceiver {}
+
+// SAFETY: as for UrRtdeReceiver: both handles are owned exclusively and used by one thread at a
+// time; ur_rtde's control interface has no thread affinity.
+unsafe impl Send for UrRtdeRobot {}
+
 impl Drop for UrRtdeReceiver {
     fn drop(&mut self) {
         // SAFETY: the handle came from urs_receive_new and is freed once, here.
@@ -322,13 +331,13 @@ impl Drop for UrRtdeReceiver {
 /// A UR arm through ur_rtde: [`UrRtdeReceiver`] for the state and ur_rtde's
 /// RTDEControlInterface (its own control script on the controller) for the commands.
 ///
-/// Owns both handles (freed on drop: the control script is stopped first); `!Sync`/`!Send`.
+/// Owns both handles (freed on drop: the control script is stopped first); `Send`, `!Sync`.
 #[derive(Debug)]
 pub struct UrRtdeRobot {
     rx: UrRtdeReceiver,
     ctl: NonNull<ffi::UrsControl>,
     period_s: f64,
-    _not_sync: PhantomData<*mut ()>,
+    _not_sync: PhantomData<std::cell::Cell<()>>,
 }
 
 impl UrRtdeRobot {

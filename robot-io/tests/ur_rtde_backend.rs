@@ -212,3 +212,11 @@ fn servo_j_moves_the_emulated_arm() {
     drop(robot);
     emu.shutdown();
 }
+
+/// The trial's control thread owns its robot: both types move between threads.
+#[test]
+fn handles_are_send() {
+    fn send<T: Send>() {}
+    send::<UrRtdeReceiver>();
+    send::<UrRtdeRobot>();
+}
