@@ -64,9 +64,9 @@ pub use emulator::{Emulator, EmulatorBackend, EmulatorConfig, SimBackend, TraceB
 pub use rtde_robot::{RtdeRobot, RtdeRobotConfig};
 #[cfg(feature = "ur-rtde")]
 pub mod ur_rtde_robot;
+pub use script::{RegisterMap, ScriptSender};
 #[cfg(feature = "ur-rtde")]
 pub use ur_rtde_robot::{UrRtdeConfig, UrRtdeReceiver, UrRtdeRobot};
-pub use script::{RegisterMap, ScriptSender};
 
 // --- kinematics (UR5e FK and Jacobians; used by sim, adapt and safety) ---
 pub mod kinematics;
