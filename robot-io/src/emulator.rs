@@ -16,9 +16,16 @@
 //! input (`IN_USE`), and a client whose queue stays full for
 //! [`EmulatorConfig::stall_timeout`] is dropped.
 //!
+//! The script ports (30002, 30003) keep a client's connection open and take each program at
+//! its top-level `end` ([`split_program`]). [`SimBackend`] runs two programs: our
+//! `hrc_control` register protocol ([`crate::script::RegisterMap`]) and SDU ur_rtde 1.6.5's
+//! `rtde_control.script`, which `RTDEControlInterface` uploads ([`ur_rtde_control`]: servoJ,
+//! speedJ, moveJ, stopJ, servoStop, speedStop, the watchdog, the async progress register and
+//! the joint-space getters; other commands stop the script as a script error would).
+//!
 //! Not emulated: the primary/secondary interfaces' state packages (the script ports only
-//! receive), URScript itself (the script port recognises our control program and the emulator
-//! executes our register protocol natively, see [`crate::script::RegisterMap`]).
+//! receive), URScript itself (the emulator recognises the two programs and executes their
+//! protocols natively).
 
 use std::any::Any;
 use std::collections::HashMap;
@@ -47,8 +54,11 @@ use crate::{Result, RobotIoError};
 pub mod dashboard_budget;
 #[path = "sim_fields.rs"]
 pub mod sim_fields;
+#[path = "emulator_ur_rtde.rs"]
+pub mod ur_rtde_control;
 use dashboard_budget::{LineBudget, MAX_DASHBOARD_CONNECTIONS};
 use sim_fields::{IoEcho, SimFields};
+use ur_rtde_control::{OutputRegisters, UrRtdeControl, UrRtdeScript, Verdict};
 
 /// Controller cycle \[s\].
 pub const CYCLE_S: f64 = 0.002;
@@ -496,6 +506,8 @@ pub trait EmulatorBackend: Send + std::fmt::Debug + 'static {
 const SIM_ZERO_BASE: usize = 1000;
 /// Handles of `output_int_register_0..=47`: this base + the register number.
 const SIM_OUTPUT_INT_BASE: usize = 2000;
+/// Handles of `output_double_register_0..=47`: this base + the register number.
+const SIM_OUTPUT_DOUBLE_BASE: usize = 3000;
 
 /// Backend executing our register protocol on a [`SimRobot`].
 ///
@@ -535,6 +547,13 @@ pub struct SimBackend {
     holding: bool,
     /// Last speed slider fraction applied [-].
     slider: Option<f64>,
+    /// ur_rtde's control script, when it is the program that runs ([`ur_rtde_control`]).
+    ur_rtde: Option<UrRtdeControl>,
+    /// ur_rtde's script arrived while the previous program was still stopping: it starts
+    /// once the arm is STOPPED.
+    pending_ur_rtde: Option<UrRtdeScript>,
+    /// The output registers as the running program wrote them (zero when none runs).
+    outputs: OutputRegisters,
 }
 
 /// A servo command the program executes, and how long it has been in force.
@@ -583,6 +602,9 @@ impl SimBackend {
             slider: None,
             servo_stats: ServoStats::default(),
             holding: false,
+            ur_rtde: None,
+            pending_ur_rtde: None,
+            outputs: OutputRegisters::default(),
         }
     }
 
@@ -596,9 +618,71 @@ impl SimBackend {
         &self.published
     }
 
-    /// Whether our control program runs.
+    /// Whether a control program runs: ours, or ur_rtde's control script.
     pub fn program_running(&self) -> bool {
-        self.program.is_some()
+        self.program.is_some() || self.ur_rtde.is_some()
+    }
+
+    /// ur_rtde's control script, while it runs.
+    pub fn ur_rtde_control(&self) -> Option<&UrRtdeControl> {
+        self.ur_rtde.as_ref()
+    }
+
+    /// The output registers as the running program wrote them.
+    pub fn output_registers(&self) -> &OutputRegisters {
+        &self.outputs
+    }
+
+    /// Forgets every program (the arm's program state is the caller's business).
+    fn clear_programs(&mut self) {
+        self.program = None;
+        self.ur_rtde = None;
+        self.pending_ur_rtde = None;
+        self.outputs = OutputRegisters::default();
+    }
+
+    /// Starts ur_rtde's control script (the arm is STOPPED or PLAYING): `false` when the arm
+    /// cannot play.
+    fn start_ur_rtde(&mut self, script: UrRtdeScript) -> bool {
+        if !self.robot.play() {
+            tracing::warn!(
+                "emulator: ur_rtde's control script received but the robot cannot play \
+                 (not running, or safety stop)"
+            );
+            return false;
+        }
+        tracing::info!(
+            "emulator: ur_rtde control script started (register offset {})",
+            script.reg_offset
+        );
+        self.outputs = OutputRegisters::default();
+        self.ur_rtde = Some(UrRtdeControl::start(script, &mut self.outputs));
+        true
+    }
+
+    /// One cycle of ur_rtde's control script, if it runs.
+    fn run_ur_rtde(&mut self, inputs: &InputRegisters) {
+        if let Some(script) = self.pending_ur_rtde
+            && self.robot.runtime_state() != crate::types::runtime_state::STOPPING
+        {
+            self.pending_ur_rtde = None;
+            self.start_ur_rtde(script);
+        }
+        let Some(ctl) = &mut self.ur_rtde else { return };
+        let before = ctl.commands();
+        let verdict = ctl.cycle(inputs, &mut self.robot, &mut self.outputs);
+        self.commands_executed += ctl.commands().saturating_sub(before);
+        let reason = match verdict {
+            Verdict::Running => return,
+            Verdict::Stopped(reason) => reason,
+            Verdict::WatchdogExpired(reason) => {
+                self.watchdog_trips += 1;
+                reason
+            }
+        };
+        tracing::warn!("emulator: ur_rtde control script stopped: {reason}");
+        self.clear_programs();
+        self.robot.stop_program();
     }
 
     /// Times the watchdog stopped the program.
@@ -753,7 +837,8 @@ impl EmulatorBackend for SimBackend {
     }
 
     fn describe(&self) -> String {
-        "simulated ur5e (SimRobot), register protocol".into()
+        "simulated ur5e (SimRobot), register protocol (hrc_control or ur_rtde's control script)"
+            .into()
     }
 
     fn output_handle(&mut self, name: &str) -> Option<(OutputHandle, FieldType)> {
@@ -765,8 +850,16 @@ impl EmulatorBackend for SimBackend {
             .and_then(|n| n.parse::<usize>().ok())
             .filter(|n| *n < 48)
         {
-            // The program's tick goes to output_int_register_<int_base>; the others stay 0.
+            // Our program's tick goes to output_int_register_<int_base>; ur_rtde's script
+            // writes its own.
             return Some((OutputHandle(SIM_OUTPUT_INT_BASE + n), FieldType::Int32));
+        }
+        if let Some(n) = name
+            .strip_prefix("output_double_register_")
+            .and_then(|n| n.parse::<usize>().ok())
+            .filter(|n| *n < 48)
+        {
+            return Some((OutputHandle(SIM_OUTPUT_DOUBLE_BASE + n), FieldType::Double));
         }
         let is_output_register = name.starts_with("output_int_register_")
             || name.starts_with("output_double_register_")
@@ -788,7 +881,22 @@ impl EmulatorBackend for SimBackend {
             let ours = self
                 .program
                 .is_some_and(|m| usize::from(m.int_base) + SIM_OUTPUT_INT_BASE == h);
-            return Value::Int32(if ours { self.tick } else { 0 });
+            let written = self
+                .outputs
+                .int
+                .get(h - SIM_OUTPUT_INT_BASE)
+                .copied()
+                .unwrap_or(0);
+            return Value::Int32(if ours { self.tick } else { written });
+        }
+        if (SIM_OUTPUT_DOUBLE_BASE..SIM_OUTPUT_DOUBLE_BASE + 48).contains(&h) {
+            return Value::Double(
+                self.outputs
+                    .double
+                    .get(h - SIM_OUTPUT_DOUBLE_BASE)
+                    .copied()
+                    .unwrap_or(0.0),
+            );
         }
         Value::zero(
             FieldType::ALL
@@ -800,6 +908,7 @@ impl EmulatorBackend for SimBackend {
 
     fn step(&mut self, inputs: &InputRegisters) {
         self.run_program(inputs);
+        self.run_ur_rtde(inputs);
         self.robot.step();
         let _ = self.robot.read_state(&mut self.published);
         self.io = inputs.io;
@@ -818,12 +927,29 @@ impl EmulatorBackend for SimBackend {
 
     fn load_program(&mut self, script: &str) -> bool {
         let Some(map) = RegisterMap::from_program(script) else {
+            if let Some(ur_rtde) = UrRtdeScript::recognise(script) {
+                // As on a controller, a new program replaces the one that runs; it starts
+                // once the arm has stopped.
+                if self.program_running() {
+                    self.clear_programs();
+                    self.robot.stop_program();
+                }
+                if self.robot.runtime_state() == crate::types::runtime_state::STOPPING {
+                    self.pending_ur_rtde = Some(ur_rtde);
+                    return true;
+                }
+                return self.start_ur_rtde(ur_rtde);
+            }
             tracing::info!(
-                "emulator: script is not the hrc_control program; ignored ({} bytes)",
+                "emulator: script is neither the hrc_control program nor ur_rtde's control \
+                 script; ignored ({} bytes)",
                 script.len()
             );
             return false;
         };
+        self.ur_rtde = None;
+        self.pending_ur_rtde = None;
+        self.outputs = OutputRegisters::default();
         if !self.robot.play() {
             tracing::warn!(
                 "emulator: program received but the robot cannot play (not running, or safety stop)"
@@ -852,7 +978,7 @@ impl EmulatorBackend for SimBackend {
             DashboardCommand::PowerOff => {
                 // As on a controller: the arm brakes to rest and a running program stops.
                 self.robot.power_off();
-                self.program = None;
+                self.clear_programs();
                 "Powering off".into()
             }
             DashboardCommand::BrakeRelease => {
@@ -863,7 +989,7 @@ impl EmulatorBackend for SimBackend {
                 }
             }
             DashboardCommand::Play => {
-                if (self.program.is_some() || self.urp.is_some()) && self.robot.play() {
+                if (self.program_running() || self.urp.is_some()) && self.robot.play() {
                     "Starting program".into()
                 } else {
                     failed(cmd)
@@ -875,7 +1001,7 @@ impl EmulatorBackend for SimBackend {
             }
             DashboardCommand::Stop => {
                 self.robot.stop_program();
-                self.program = None;
+                self.clear_programs();
                 "Stopped".into()
             }
             DashboardCommand::SafetyStatus => {
@@ -909,7 +1035,7 @@ impl EmulatorBackend for SimBackend {
         if self.published.runtime_state == crate::types::runtime_state::PLAYING {
             return false;
         }
-        self.program = None;
+        self.clear_programs();
         self.urp = Some(path.to_owned());
         true
     }
@@ -922,7 +1048,7 @@ impl EmulatorBackend for SimBackend {
         self.robot.clear_protective_stop();
         self.robot.clear_emergency_stop();
         self.robot.power_off();
-        self.program = None;
+        self.clear_programs();
         true
     }
 
@@ -2618,23 +2744,88 @@ async fn serve_script(
         let count = count.clone();
         let mut paused = paused.clone();
         tokio::spawn(async move {
-            // A script ends when the sender closes, or after 500 ms without more bytes.
-            let mut text = Vec::new();
+            // The connection stays open, as on a controller: ur_rtde sends every script
+            // (re-uploads too) over one connection. A program is complete at its top-level
+            // `end` (see `split_program`); the bytes that remain form a script when the
+            // sender closes or pauses for 500 ms. The buffer is bounded.
+            let mut text: Vec<u8> = Vec::new();
             let mut chunk = [0u8; 4096];
-            while let Ok(Ok(n)) =
-                tokio::time::timeout(Duration::from_millis(500), stream.read(&mut chunk)).await
-            {
-                if n == 0 || text.len() > (1 << 20) {
-                    break;
+            loop {
+                let read =
+                    tokio::time::timeout(Duration::from_millis(500), stream.read(&mut chunk)).await;
+                let closed = match read {
+                    Ok(Ok(0)) | Ok(Err(_)) => true,
+                    Ok(Ok(n)) => {
+                        text.extend_from_slice(chunk.get(..n).unwrap_or_default());
+                        false
+                    }
+                    Err(_) => false,
+                };
+                let idle = read.is_err();
+                let mut programs = Vec::new();
+                while let Some(end) = split_program(&text) {
+                    programs.push(text.drain(..end).collect::<Vec<u8>>());
                 }
-                text.extend_from_slice(chunk.get(..n).unwrap_or_default());
+                if (closed || idle) && !text.iter().all(u8::is_ascii_whitespace) {
+                    programs.push(std::mem::take(&mut text));
+                }
+                if text.len() > MAX_SCRIPT_BYTES {
+                    tracing::warn!(
+                        "emulator: script over {MAX_SCRIPT_BYTES} bytes without a complete \
+                         program; dropped"
+                    );
+                    text.clear();
+                }
+                for program in programs {
+                    running(&mut paused).await;
+                    let program = String::from_utf8_lossy(&program);
+                    lock(&world).backend.load_program(&program);
+                    count.fetch_add(1, Ordering::Relaxed);
+                }
+                if closed {
+                    return;
+                }
+                if idle {
+                    text.clear();
+                }
             }
-            running(&mut paused).await;
-            let text = String::from_utf8_lossy(&text);
-            lock(&world).backend.load_program(&text);
-            count.fetch_add(1, Ordering::Relaxed);
         });
     }
+}
+
+/// Largest script the script ports buffer [bytes].
+pub const MAX_SCRIPT_BYTES: usize = 1 << 20;
+
+/// The length of the first complete program in `text`: from a `def`/`sec` line at column 0
+/// through the next line that is exactly `end` at column 0, plus the complete top-level lines
+/// after it up to the next `def`/`sec` line (our program's trailing `hrc_control()` call).
+/// URScript programs as ur_rtde and our [`crate::script`] send them indent their body, so a
+/// column-0 `end` closes the program. `None` while no program is complete.
+pub fn split_program(text: &[u8]) -> Option<usize> {
+    let mut at = 0;
+    let mut open = false;
+    let mut closed_at = None;
+    while let Some(rest) = text.get(at..).filter(|r| !r.is_empty()) {
+        let Some(nl) = rest.iter().position(|b| *b == b'\n') else {
+            break;
+        };
+        let line = rest.get(..nl).unwrap_or_default();
+        let line = line.strip_suffix(b"\r").unwrap_or(line);
+        let starts = line.starts_with(b"def ") || line.starts_with(b"sec ");
+        if closed_at.is_some() && starts {
+            break;
+        }
+        if !open && starts {
+            open = true;
+        } else if open && closed_at.is_none() && line.trim_ascii_end() == b"end" {
+            closed_at = Some(at + nl + 1);
+        }
+        at += nl + 1;
+        if closed_at.is_some() {
+            closed_at = Some(at);
+        }
+    }
+    closed_at
 }
 
 /// The command these registers hold, as the emulator's SimBackend decodes it (for tools that

@@ -408,6 +408,18 @@ impl SimRobot {
         &self.state
     }
 
+    /// The program's runtime state now (`runtime_state` values), including a change made
+    /// since the last step (which [`SimRobot::state`] shows only after the next one).
+    pub fn runtime_state(&self) -> u32 {
+        self.runtime_state
+    }
+
+    /// The speed scale the next step applies to commanded velocities [-]: speed scaling ×
+    /// speed slider while PLAYING, else 0 (see the module docs).
+    pub fn speed_scale(&self) -> f64 {
+        self.scale()
+    }
+
     /// Cycles stepped since construction.
     pub fn cycles(&self) -> u64 {
         self.cycle
