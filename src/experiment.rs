@@ -58,6 +58,10 @@ pub struct ExperimentArgs {
     /// `sim` (in-process, for a rehearsal) or a UR5e's address.
     #[arg(long, requires = "participant")]
     robot: Option<String>,
+    /// Real session: how the robot is driven, `native` or `ur_rtde` (see `trial
+    /// --robot-backend`).
+    #[arg(long, requires = "participant", default_value = "native", value_parser = ["native", "ur_rtde"])]
+    robot_backend: String,
     /// Real session with `--robot emulator`: controller cycles per 2 ms of wall time
     /// (default 4; a live camera needs 1, its default then), 1..=100: one cycle every
     /// 2 ms / N of wall time, and the trial loop already skips most samples far below 100.
@@ -390,6 +394,7 @@ fn run_real_session(args: &ExperimentArgs, participant: &str) -> crate::Result<(
     );
     let live = matches!(cues, CueSource::Camera(_));
     let robot = crate::trial::robot_choice(&robot_name, args.speedup, live)?;
+    let robot = crate::trial::with_backend(robot, &args.robot_backend, args.speedup)?;
     let dir = crate::trial::create_run_dir(&args.out_root.join(format!(
         "{}-session-{participant}",
         crate::trial::wall_stamp()

@@ -69,7 +69,8 @@ pub struct EmulateArgs {
     #[arg(long, default_value_t = 30003)]
     realtime_port: u16,
     /// Controller cycles per 2 ms of wall time (1 = real time), 1..=100: one cycle every
-    /// 2 ms / N of wall time, so far beyond 100 the emulator cannot keep up.
+    /// 2 ms / N of wall time, so far beyond 100 the emulator cannot keep up. (With --sim,
+    /// SIGUSR1 injects a protective stop: fault injection for hardware-in-the-loop tests.)
     #[arg(long, default_value_t = 1, value_parser = crate::trial::speedup_parser())]
     speedup: u32,
     /// SCHED_FIFO priority of the emulator's clock thread, as a controller's real-time clock
@@ -247,12 +248,35 @@ async fn emulate_async(args: EmulateArgs) -> crate::Result<()> {
         emu.secondary_addr(),
         emu.realtime_addr()
     );
-    tokio::signal::ctrl_c()
-        .await
+    // Fault injection for hardware-in-the-loop tests: SIGUSR1 puts the simulated arm into a
+    // protective stop, as a collision would (--sim only; release it with the dashboard's
+    // `unlock protective stop`).
+    let mut usr1 = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::user_defined1())
         .map_err(|source| Error::Thread {
-            name: "Ctrl-C handler",
+            name: "SIGUSR1 handler",
             source,
         })?;
+    let ctrl_c = tokio::signal::ctrl_c();
+    tokio::pin!(ctrl_c);
+    loop {
+        tokio::select! {
+            r = &mut ctrl_c => {
+                r.map_err(|source| Error::Thread { name: "Ctrl-C handler", source })?;
+                break;
+            }
+            _ = usr1.recv() => {
+                let done = emu.with_sim(|b| b.robot_mut().inject_protective_stop());
+                eprintln!(
+                    "emulator: SIGUSR1: {}",
+                    if done.is_some() {
+                        "protective stop injected (simulated fault)"
+                    } else {
+                        "ignored: a trace backend cannot be protective-stopped"
+                    }
+                );
+            }
+        }
+    }
     drop(emu);
     Ok(())
 }

@@ -272,6 +272,11 @@ impl std::fmt::Debug for RtdeGuard {
 }
 
 impl RtdeGuard {
+    /// Keeps `emulator` (if any) and `rt` alive until [`RtdeGuard::close`].
+    pub(crate) fn new(emulator: Option<Arc<Emulator>>, rt: tokio::runtime::Runtime) -> Self {
+        Self { emulator, rt }
+    }
+
     /// The in-process emulator (tests freeze and kill it).
     #[cfg(test)]
     pub(crate) fn emulator(&self) -> Option<Arc<Emulator>> {
@@ -443,6 +448,25 @@ pub(crate) fn connect_ur(
     stop: &AtomicBool,
 ) -> crate::Result<(PacedRtde, RtdeGuard)> {
     let (rt, io_scheduling) = rtde_runtime(realtime.rtde_io())?;
+    check_and_confirm(&rt, host, ports, stop)?;
+    let robot = rt.block_on(connect(
+        host,
+        ports.rtde,
+        ports.script,
+        RegisterMap::default(),
+    ))?;
+    let robot = PacedRtde::new(robot, None, UR_PERIOD, io_scheduling);
+    Ok((robot, RtdeGuard { emulator: None, rt }))
+}
+
+/// The dashboard checks before a real UR5e moves (remote control, normal safety status,
+/// printed), then the operator's `yes` on stdin (Ctrl-C there ends as `interrupted`).
+pub(crate) fn check_and_confirm(
+    rt: &tokio::runtime::Runtime,
+    host: &str,
+    ports: UrPorts,
+    stop: &AtomicBool,
+) -> crate::Result<()> {
     rt.block_on(async {
         let mut d = DashboardClient::connect(host, ports.dashboard, Duration::from_secs(3))
             .await
@@ -487,14 +511,7 @@ pub(crate) fn connect_ur(
             answer: line.trim().to_owned(),
         }
     );
-    let robot = rt.block_on(connect(
-        host,
-        ports.rtde,
-        ports.script,
-        RegisterMap::default(),
-    ))?;
-    let robot = PacedRtde::new(robot, None, UR_PERIOD, io_scheduling);
-    Ok((robot, RtdeGuard { emulator: None, rt }))
+    Ok(())
 }
 
 #[cfg(test)]

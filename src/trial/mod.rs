@@ -15,6 +15,8 @@
 //!   `report.html`), fed directly by the runtime.
 
 mod backend;
+#[cfg(feature = "ur-rtde")]
+mod backend_ur_rtde;
 pub mod config;
 mod control;
 mod cue_cycle;
@@ -65,6 +67,10 @@ pub struct TrialArgs {
     /// clock), `sim` (in-process, mock clock, deterministic) or a UR5e's address.
     #[arg(long, default_value = "emulator")]
     robot: String,
+    /// How the robot is driven: `native` (our RTDE client and control program) or `ur_rtde`
+    /// (SDU ur_rtde 1.6.5 and its control script; a build with `--features ur-rtde`).
+    #[arg(long, default_value = "native", value_parser = ["native", "ur_rtde"])]
+    robot_backend: String,
     /// `--robot emulator`: controller cycles the emulator runs per 2 ms of wall time
     /// (default 4; a live camera needs 1, its default then), 1..=100: one cycle every
     /// 2 ms / N of wall time, and the trial loop already skips most samples far below 100.
@@ -139,6 +145,7 @@ pub fn run(args: TrialArgs) -> crate::Result<()> {
             )
         ),
     }
+    let robot = with_backend(robot, &args.robot_backend, args.speedup)?;
     // The wall clock is used only for the folder name; a folder of the same second gets a
     // suffix (-2, -3, …).
     let dir = create_run_dir(&run_folder(&args.out_root, &wall_stamp(), &spec))?;
@@ -260,6 +267,74 @@ pub(crate) fn robot_choice(
             ports: backend::UrPorts::default(),
         },
     })
+}
+
+/// `robot` driven through `backend` (`--robot-backend`): `native` leaves it as it is;
+/// `ur_rtde` takes the emulator or a UR5e on UR's standard ports (ur_rtde's are fixed), not
+/// the mock-clock `sim`.
+///
+/// The emulator runs in real time under ur_rtde (`--speedup 1`, its default then): ur_rtde's
+/// control script has no servo feedforward, so a servo target must come every controller
+/// cycle, which the trial loop does only in real time. Sped up, the held targets made the
+/// simulated arm's servo saturate its acceleration (an L1 trial at speedup 4: jerk RMS 196
+/// rad/s³ against 0.7 on the native backend).
+pub(crate) fn with_backend(
+    robot: runtime::RobotChoice,
+    backend: &str,
+    speedup: Option<u32>,
+) -> crate::Result<runtime::RobotChoice> {
+    use runtime::RobotChoice as R;
+    Ok(match (backend, robot) {
+        ("native", r) => r,
+        ("ur_rtde", R::Sim) => {
+            return Err(Error::usage(
+                "--robot-backend",
+                "--robot-backend ur_rtde drives a controller over RTDE: use --robot emulator or \
+                 --robot <address>, not --robot sim",
+            ));
+        }
+        ("ur_rtde", R::Emulator { .. }) => match speedup {
+            None | Some(1) => R::EmulatorUrRtde { speedup: 1 },
+            Some(s) => {
+                return Err(Error::usage(
+                    "--speedup",
+                    format!(
+                        "--speedup {s}: with --robot-backend ur_rtde the emulator runs in real \
+                         time (--speedup 1, the default then): ur_rtde's control script has no \
+                         servo feedforward, so the trial must send a target every cycle"
+                    ),
+                ));
+            }
+        },
+        ("ur_rtde", R::Ur { host, ports }) => {
+            ensure!(
+                ports == backend::UrPorts::default(),
+                Error::usage(
+                    "--rtde-port, --dashboard-port, --script-port",
+                    "ur_rtde uses UR's fixed ports (30004, 29999, 30003): the port options \
+                     need --robot-backend native"
+                )
+            );
+            R::UrRtde { host }
+        }
+        ("ur_rtde", r) => r,
+        (other, _) => {
+            return Err(Error::usage(
+                "--robot-backend",
+                format!("{other:?}: expected `native` or `ur_rtde`"),
+            ));
+        }
+    })
+}
+
+/// The error for `--robot-backend ur_rtde` in a build without it.
+#[cfg(not(feature = "ur-rtde"))]
+pub(crate) fn no_ur_rtde_feature() -> Error {
+    Error::usage(
+        "--robot-backend",
+        "this build has no ur_rtde backend: run scripts/setup, then build with \
+         `cargo build --release --features ur-rtde`",
+    )
 }
 
 /// The trial's cue source from `--cues`: none → simulated operator; `camera` / `webcam:N` →

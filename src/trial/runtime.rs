@@ -173,6 +173,18 @@ pub(crate) enum RobotChoice {
         /// Controller cycles per 2 ms of wall time.
         speedup: u32,
     },
+    /// The in-process emulator as above, on 127.0.0.1 with UR's ports, driven through
+    /// ur_rtde (`--robot-backend ur_rtde`; needs the `ur-rtde` feature).
+    EmulatorUrRtde {
+        /// Controller cycles per 2 ms of wall time.
+        speedup: u32,
+    },
+    /// A real UR5e (or `hrc-adapt emulate`) at this address through ur_rtde (UR's fixed
+    /// ports; needs the `ur-rtde` feature).
+    UrRtde {
+        /// Host name or IP address.
+        host: String,
+    },
     /// A real UR5e (or `hrc-adapt emulate`) at this address.
     Ur {
         /// Host name or IP address.
@@ -565,6 +577,48 @@ pub(crate) fn run_trial_with_cues(
             guard.close();
             out
         }
+        #[cfg(feature = "ur-rtde")]
+        RobotChoice::EmulatorUrRtde { speedup } => {
+            let (robot, guard) = super::backend_ur_rtde::start_emulator(
+                home,
+                *speedup,
+                spec.config.realtime,
+                spec.config.emulator,
+            )?;
+            let out = drive(
+                spec,
+                setup,
+                robot,
+                Clock::Controller(f64::from(*speedup)),
+                "emulator (ur_rtde)",
+                out_dir,
+                stop,
+                progress,
+            );
+            guard.close();
+            out
+        }
+        #[cfg(feature = "ur-rtde")]
+        RobotChoice::UrRtde { host } => {
+            let (robot, guard) =
+                super::backend_ur_rtde::connect_ur(host, spec.config.realtime, stop)?;
+            let out = drive(
+                spec,
+                setup,
+                robot,
+                Clock::Controller(1.0),
+                host,
+                out_dir,
+                stop,
+                progress,
+            );
+            guard.close();
+            out
+        }
+        #[cfg(not(feature = "ur-rtde"))]
+        RobotChoice::EmulatorUrRtde { .. } | RobotChoice::UrRtde { .. } => {
+            Err(super::no_ur_rtde_feature())
+        }
         RobotChoice::Ur { host, ports } => {
             let (robot, guard) =
                 super::backend::connect_ur(host, *ports, spec.config.realtime, stop)?;
@@ -604,7 +658,8 @@ fn load_setup(
         #[cfg(feature = "vision")]
         CueSource::Camera(spec) => {
             let spec = super::cues::CameraSpec {
-                require_depth: spec.require_depth || matches!(robot, RobotChoice::Ur { .. }),
+                require_depth: spec.require_depth
+                    || matches!(robot, RobotChoice::Ur { .. } | RobotChoice::UrRtde { .. }),
                 ..spec.clone()
             };
             Some(LiveCues::start(&spec, out_dir)?)

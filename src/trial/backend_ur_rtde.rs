@@ -1,0 +1,172 @@
+//! The ur_rtde backend for a trial (`--robot-backend ur_rtde`, feature `ur-rtde`): a
+//! [`UrRtdeRobot`] (SDU ur_rtde 1.6.5 through robot-io's C shim) paced like the native
+//! backend, on the controller's timestamps ([`paced_read`], the same bounded wait as
+//! [`super::backend::PacedRtde`]).
+//!
+//! ur_rtde's interfaces use UR's fixed ports (30004, 30003, 29999). So with `--robot
+//! emulator` the in-process emulator listens on 127.0.0.1 with those ports (it fails clearly
+//! when another program holds them), and with `--robot <address>` only the address can be
+//! chosen.
+//!
+//! What differs from the native backend, and why:
+//! - The controller runs ur_rtde's control script, not our `hrc_control`: no servo
+//!   feedforward (a late target is held, not extrapolated), and no register watchdog (ur_rtde
+//!   arms one only on `setWatchdog`, which the trial does not call).
+//! - A stop: the supervisor repeats its Stop every cycle while the arm brakes; ur_rtde's
+//!   `stopJ` waits for the script's "done" (a few controller cycles), so an identical Stop
+//!   that follows a Stop is not sent again (the controller already brakes at that
+//!   deceleration). Any other command is sent every cycle.
+//! - No program restart after a link loss ([`TrialRobot::restart_program`] is `false`):
+//!   ur_rtde's own reconnect re-uploads its script, which blocks for seconds.
+
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+use crate::error::ResultExt as _;
+use robot_io::emulator::{Emulator, EmulatorConfig, SimBackend};
+use robot_io::realtime::Scheduling;
+use robot_io::sim::{SimConfig, SimRobot};
+use robot_io::{JointCommand, Robot, RobotState, UrRtdeConfig, UrRtdeRobot};
+
+use super::backend::{RtdeGuard, SampleSource, UR_PERIOD, paced_read, rtde_runtime, sample_wait};
+use super::config::{EmulatorSection, RealtimeConfig};
+use super::runtime::TrialRobot;
+
+/// A [`UrRtdeRobot`] paced on the controller timestamp (see the module docs).
+pub(crate) struct PacedUrRtde {
+    robot: UrRtdeRobot,
+    last_ts: f64,
+    last_fresh: Option<Instant>,
+    period: Duration,
+    emulator: Option<Arc<Emulator>>,
+    /// The Stop last sent, while no other command followed it.
+    stopping: Option<JointCommand>,
+}
+
+impl std::fmt::Debug for PacedUrRtde {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PacedUrRtde")
+            .field("last_ts", &self.last_ts)
+            .finish_non_exhaustive()
+    }
+}
+
+struct Source<'a>(&'a mut UrRtdeRobot);
+
+impl SampleSource for Source<'_> {
+    fn now(&self) -> Instant {
+        Instant::now()
+    }
+    fn read(&mut self, out: &mut RobotState) -> robot_io::Result<()> {
+        self.0.read_state(out)
+    }
+    fn nap(&mut self, d: Duration) {
+        std::thread::sleep(d);
+    }
+}
+
+impl Robot for PacedUrRtde {
+    /// As [`super::backend::PacedRtde`]: the newest sample if newer, else a bounded wait for
+    /// the next one. ur_rtde's read copies its receive thread's latest sample (and allocates
+    /// on the C++ heap: robot-io's `ur_rtde_robot` module docs).
+    fn read_state(&mut self, out: &mut RobotState) -> robot_io::Result<()> {
+        let wait = sample_wait(Instant::now(), self.last_fresh, self.period);
+        let before = self.last_ts;
+        let r = paced_read(&mut Source(&mut self.robot), &mut self.last_ts, out, wait);
+        if self.last_ts > before {
+            self.last_fresh = Some(Instant::now());
+        }
+        r
+    }
+
+    fn send(&mut self, cmd: &JointCommand) -> robot_io::Result<()> {
+        if matches!(cmd, JointCommand::Stop { .. }) && self.stopping.as_ref() == Some(cmd) {
+            return Ok(());
+        }
+        self.robot.send(cmd)?;
+        self.stopping = matches!(cmd, JointCommand::Stop { .. }).then_some(*cmd);
+        Ok(())
+    }
+}
+
+impl TrialRobot for PacedUrRtde {
+    fn servo_stats(&self) -> Option<robot_io::emulator::ServoStats> {
+        // Counted for our program only; ur_rtde's script is not our feedforward protocol.
+        None
+    }
+    fn emulator_clock(&self) -> Option<robot_io::emulator::ClockStats> {
+        self.emulator.as_ref().map(|e| e.clock_stats())
+    }
+    fn emulator_clock_scheduling(&self) -> Option<Scheduling> {
+        self.emulator.as_ref().and_then(|e| e.clock_scheduling())
+    }
+}
+
+fn connect(
+    host: &str,
+    emulator: Option<Arc<Emulator>>,
+    period: Duration,
+) -> crate::Result<PacedUrRtde> {
+    let robot = UrRtdeRobot::connect(&UrRtdeConfig::new(host))
+        .with_context(|| format!("cannot connect ur_rtde to {host}"))?;
+    Ok(PacedUrRtde {
+        robot,
+        last_ts: f64::NEG_INFINITY,
+        last_fresh: None,
+        period,
+        emulator,
+        stopping: None,
+    })
+}
+
+/// The in-process emulator on 127.0.0.1 with UR's ports and a `SimRobot` at `home_q`, and
+/// ur_rtde connected to it (its control script uploaded and running).
+pub(crate) fn start_emulator(
+    home_q: [f64; 6],
+    speedup: u32,
+    realtime: RealtimeConfig,
+    emulator: EmulatorSection,
+) -> crate::Result<(PacedUrRtde, RtdeGuard)> {
+    let (rt, _io) = rtde_runtime(None)?;
+    let emu = rt.block_on(async {
+        let sim = SimRobot::new(SimConfig {
+            initial_q_rad: home_q,
+            ..SimConfig::ur5e()
+        })?;
+        Emulator::start(
+            EmulatorConfig {
+                speedup,
+                clock_priority: realtime.emulator_clock(),
+                wait_for_client: emulator.wait_for_client(speedup),
+                ..EmulatorConfig::default()
+            },
+            Box::new(SimBackend::new(sim)),
+        )
+        .await
+        .context(
+            "cannot start the emulator on 127.0.0.1 with UR's ports 30004, 29999, 30002, \
+             30003, which ur_rtde needs (is another emulator running?)",
+        )
+    })?;
+    let emu = Arc::new(emu);
+    let robot = connect(
+        "127.0.0.1",
+        Some(Arc::clone(&emu)),
+        UR_PERIOD / speedup.max(1),
+    )?;
+    Ok((robot, RtdeGuard::new(Some(emu), rt)))
+}
+
+/// A real UR5e at `host` through ur_rtde, after the same dashboard checks and confirmation as
+/// the native backend ([`super::backend::check_and_confirm`]).
+pub(crate) fn connect_ur(
+    host: &str,
+    realtime: RealtimeConfig,
+    stop: &AtomicBool,
+) -> crate::Result<(PacedUrRtde, RtdeGuard)> {
+    let (rt, _io) = rtde_runtime(realtime.rtde_io())?;
+    super::backend::check_and_confirm(&rt, host, super::backend::UrPorts::default(), stop)?;
+    let robot = connect(host, None, UR_PERIOD)?;
+    Ok((robot, RtdeGuard::new(None, rt)))
+}
