@@ -173,12 +173,9 @@ fn protective_stop_is_seen() {
     emu.shutdown();
 }
 
-/// Needs the emulator to run ur_rtde's control script (RTDEControlInterface's upload and
-/// register protocol); until then RTDEControlInterface's constructor fails against it (measured:
-/// `UrRtde { call: "RTDEControlInterface()", message: "ur_rtde: Failed to start control script,
-/// before timeout of 5 seconds" }`). Run it with `--ignored` once the emulator serves it.
+/// The emulator runs ur_rtde's control script (`robot_io::emulator::ur_rtde_control`):
+/// RTDEControlInterface uploads it, and servoJ through our shim moves the simulated arm.
 #[test]
-#[ignore = "the emulator does not run ur_rtde's control script yet"]
 fn servo_j_moves_the_emulated_arm() {
     let rt = runtime();
     let emu = emulator(&rt, 5);
