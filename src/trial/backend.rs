@@ -273,6 +273,7 @@ impl std::fmt::Debug for RtdeGuard {
 
 impl RtdeGuard {
     /// Keeps `emulator` (if any) and `rt` alive until [`RtdeGuard::close`].
+    #[cfg(feature = "ur-rtde")]
     pub(crate) fn new(emulator: Option<Arc<Emulator>>, rt: tokio::runtime::Runtime) -> Self {
         Self { emulator, rt }
     }
