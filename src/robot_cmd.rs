@@ -37,6 +37,12 @@ pub struct RecordArgs {
     /// but not sooner than this).
     #[arg(long, default_value_t = 100)]
     link_timeout_ms: u64,
+    /// How to record: `native` (our RTDE client: any fields, every package) or `ur_rtde` (SDU
+    /// ur_rtde 1.6.5's receive interface, a build with `--features ur-rtde`: the robot state
+    /// fields only, on UR's port 30004; ur_rtde keeps only its newest sample, so record polls
+    /// it every 0.25 ms and counts each sample it missed).
+    #[arg(long, default_value = "native", value_parser = ["native", "ur_rtde"])]
+    robot_backend: String,
 }
 
 /// Arguments of `hrc-adapt emulate`.
@@ -90,7 +96,141 @@ fn runtime() -> crate::Result<tokio::runtime::Runtime> {
 
 /// Runs `hrc-adapt record`: records the controller over RTDE into a CSV trace until Ctrl-C.
 pub fn record(args: RecordArgs) -> crate::Result<()> {
+    if args.robot_backend == "ur_rtde" {
+        return record_ur_rtde(&args);
+    }
     runtime()?.block_on(record_async(args))
+}
+
+/// `record --robot-backend ur_rtde`: the checks that hold in every build, then the recording.
+fn record_ur_rtde(args: &RecordArgs) -> crate::Result<()> {
+    if args.port != 30004 {
+        return Err(Error::usage(
+            "--port",
+            format!(
+                "--port {}: ur_rtde always connects to the controller's RTDE port 30004",
+                args.port
+            ),
+        ));
+    }
+    let default = STATE_FIELDS
+        .iter()
+        .all(|f| args.fields.iter().any(|g| g == f))
+        && args.fields.len() == STATE_FIELDS.len();
+    if !args.fields.is_empty() && !default {
+        return Err(Error::usage(
+            "--fields",
+            format!(
+                "--robot-backend ur_rtde records the robot state fields ({}); record other \
+                 fields with --robot-backend native",
+                STATE_FIELDS.join(",")
+            ),
+        ));
+    }
+    if !(args.hz.is_finite() && args.hz > 0.0 && args.hz <= 500.0) {
+        return Err(Error::usage(
+            "--hz",
+            format!("--hz {}: give a frequency in (0, 500] Hz", args.hz),
+        ));
+    }
+    #[cfg(feature = "ur-rtde")]
+    {
+        record_with_ur_rtde(args)
+    }
+    #[cfg(not(feature = "ur-rtde"))]
+    {
+        Err(crate::trial::no_ur_rtde_feature())
+    }
+}
+
+/// Records through ur_rtde's `RTDEReceiveInterface` until Ctrl-C.
+///
+/// ur_rtde receives on its own thread and keeps only the newest sample. This loop polls it
+/// every 0.25 ms (an eighth of the 500 Hz period) and writes each sample with a new
+/// controller timestamp once. A sample that ur_rtde replaced before the poll saw it is lost:
+/// the gap in the controller timestamps counts it, and the count is printed at the end.
+#[cfg(feature = "ur-rtde")]
+fn record_with_ur_rtde(args: &RecordArgs) -> crate::Result<()> {
+    use robot_io::trace::{STATE_FIELD_NAMES, state_to_row};
+    use robot_io::{RobotState, UrRtdeConfig, UrRtdeReceiver};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+
+    let mut cfg = UrRtdeConfig::new(args.robot.clone());
+    cfg.frequency_hz = args.hz;
+    let mut rx = UrRtdeReceiver::connect(&cfg)
+        .with_context(|| format!("connecting ur_rtde to {}:30004", args.robot))?;
+    // The first sample at once: ur_rtde returns from its constructor with the stream's first
+    // package and replaces it 2 ms later, before the file is set up.
+    let mut state = RobotState::default();
+    rx.read(&mut state)
+        .context("the first sample from ur_rtde")?;
+    let file = File::create(&args.out).map_err(Error::io("create", &args.out))?;
+    let mut writer = TraceWriter::new(
+        BufWriter::new(file),
+        &STATE_FIELD_NAMES,
+        &WriteOptions::record_py(),
+    )?;
+    writer.flush()?;
+    let stop = Arc::new(AtomicBool::new(false));
+    crate::trial::install_ctrl_c(stop.clone());
+    tracing::info!(
+        "recording the robot state through ur_rtde at {} Hz to {}; Ctrl-C to stop",
+        args.hz,
+        args.out.display()
+    );
+    let period_s = 1.0 / args.hz;
+    let mut row = [0.0; 44];
+    let mut last_t: Option<f64> = None;
+    let mut lost = 0u64;
+    let mut last_flush = Instant::now();
+    let mut fresh = true; // `state` holds a sample not yet written
+    while !stop.load(Ordering::Relaxed) {
+        if !fresh {
+            match rx.read(&mut state) {
+                Ok(()) => {}
+                Err(e @ robot_io::RobotIoError::LinkDown { .. }) => {
+                    writer.flush()?;
+                    tracing::warn!("{e}; reconnecting in 0.5 s");
+                    std::thread::sleep(Duration::from_millis(500));
+                    if let Err(e) = rx.reconnect() {
+                        tracing::warn!("ur_rtde reconnect: {e}");
+                    }
+                    continue;
+                }
+                Err(e) => {
+                    // No consistent sample this poll; the next poll tries again, and a
+                    // sample it misses is counted below.
+                    tracing::warn!("{e}");
+                    continue;
+                }
+            }
+        }
+        fresh = false;
+        if last_t != Some(state.timestamp_s) {
+            if let Some(t0) = last_t {
+                let steps = ((state.timestamp_s - t0) / period_s).round();
+                if steps > 1.0 {
+                    lost += (steps - 1.0) as u64;
+                }
+            }
+            last_t = Some(state.timestamp_s);
+            state_to_row(&state, &mut row);
+            writer.write_row(&row)?;
+        }
+        if last_flush.elapsed() >= Duration::from_millis(100) {
+            writer.flush()?;
+            last_flush = Instant::now();
+        }
+        std::thread::sleep(Duration::from_micros(250));
+    }
+    writer.flush()?;
+    tracing::info!(
+        "wrote {} rows to {} ({lost} samples replaced by ur_rtde before a poll saw them)",
+        writer.rows_written(),
+        args.out.display()
+    );
+    Ok(())
 }
 
 async fn record_async(args: RecordArgs) -> crate::Result<()> {

@@ -55,6 +55,17 @@ struct urs_control {
     return URS_EXCEPTION;                                   \
   }
 
+// A command on a control interface whose link is down: ur_rtde's stopJ, servoStop and
+// speedStop wait for the script's "done" on the last state received, which a dead controller
+// never changes, for up to UR_EXECUTION_TIMEOUT (300 s); servoJ and speedJ wait up to 3 s for
+// "ready". Checked first, so a lost link is an error at once (seen: a trial whose emulator
+// was killed blocked in stopJ).
+#define URS_REQUIRE_LINK(h)                                          \
+  if (!(h)->ctl->isConnected()) {                                   \
+    put((h)->err, kMsg, "RTDEControlInterface is not connected");   \
+    return URS_DISCONNECTED;                                         \
+  }
+
 extern "C" {
 
 urs_receive *urs_receive_new(const char *host, double frequency_hz, char *err, size_t err_len) {
@@ -96,21 +107,31 @@ int urs_receive_read(urs_receive *h, urs_state *out) {
       put(h->err, kMsg, "RTDEReceiveInterface is not connected");
       return URS_DISCONNECTED;
     }
-    out->timestamp_s = rx.getTimestamp();
-    copy6(rx.getActualQ(), out->actual_q);
-    copy6(rx.getActualQd(), out->actual_qd);
-    copy6(rx.getTargetQ(), out->target_q);
-    copy6(rx.getTargetQd(), out->target_qd);
-    copy6(rx.getActualTCPPose(), out->actual_tcp_pose);
-    copy6(rx.getActualTCPSpeed(), out->actual_tcp_speed);
-    out->speed_scaling = rx.getSpeedScaling();
-    out->target_speed_fraction = rx.getTargetSpeedFraction();
-    out->robot_mode = rx.getRobotMode();
-    out->safety_mode = rx.getSafetyMode();
-    out->runtime_state = rx.getRuntimeState();
-    out->robot_status_bits = rx.getRobotStatus();
-    out->safety_status_bits = rx.getSafetyStatusBits();
-    return URS_OK;
+    // ur_rtde's receive thread writes a whole package under its state mutex, but each getter
+    // locks on its own: a package arriving between two getters would mix two samples (seen
+    // under load: a row with one sample's timestamp and the next one's joints). Each package
+    // has a new controller timestamp, so the fields are one sample when the timestamp read
+    // after them is the one read before them; otherwise read again.
+    for (int attempt = 0; attempt < 8; ++attempt) {
+      const double t0 = rx.getTimestamp();
+      copy6(rx.getActualQ(), out->actual_q);
+      copy6(rx.getActualQd(), out->actual_qd);
+      copy6(rx.getTargetQ(), out->target_q);
+      copy6(rx.getTargetQd(), out->target_qd);
+      copy6(rx.getActualTCPPose(), out->actual_tcp_pose);
+      copy6(rx.getActualTCPSpeed(), out->actual_tcp_speed);
+      out->speed_scaling = rx.getSpeedScaling();
+      out->target_speed_fraction = rx.getTargetSpeedFraction();
+      out->robot_mode = rx.getRobotMode();
+      out->safety_mode = rx.getSafetyMode();
+      out->runtime_state = rx.getRuntimeState();
+      out->robot_status_bits = rx.getRobotStatus();
+      out->safety_status_bits = rx.getSafetyStatusBits();
+      out->timestamp_s = t0;
+      if (rx.getTimestamp() == t0) return URS_OK;
+    }
+    put(h->err, kMsg, "the state changed during each of 8 reads (no consistent sample)");
+    return URS_REJECTED;
   })
 }
 
@@ -149,7 +170,9 @@ urs_control *urs_control_new(const char *host, double frequency_hz, int upper_ra
 void urs_control_free(urs_control *h) {
   if (h == nullptr) return;
   try {
-    if (h->ctl) h->ctl->stopScript();
+    // Not on a dead link: stopScript then waits for the program to stop on the last state
+    // received, up to 300 s (see URS_REQUIRE_LINK).
+    if (h->ctl && h->ctl->isConnected()) h->ctl->stopScript();
   } catch (...) {
   }
   try {
@@ -168,6 +191,7 @@ int urs_control_servo_j(urs_control *h, const double q[6], double time_s, double
                         double gain) {
   if (q == nullptr) return URS_BAD_ARGUMENT;
   URS_GUARD(h, {
+    URS_REQUIRE_LINK(h);
     for (size_t i = 0; i < 6; ++i) h->buf[i] = q[i];
     // speed and acceleration are not used by UR's servoj (ur_rtde passes them on).
     return taken(h, h->ctl->servoJ(h->buf, 0.0, 0.0, time_s, lookahead_s, gain),
@@ -178,21 +202,29 @@ int urs_control_servo_j(urs_control *h, const double q[6], double time_s, double
 int urs_control_speed_j(urs_control *h, const double qd[6], double acc, double time_s) {
   if (qd == nullptr) return URS_BAD_ARGUMENT;
   URS_GUARD(h, {
+    URS_REQUIRE_LINK(h);
     for (size_t i = 0; i < 6; ++i) h->buf[i] = qd[i];
     return taken(h, h->ctl->speedJ(h->buf, acc, time_s), "RTDEControlInterface::speedJ returned false");
   })
 }
 
 int urs_control_servo_stop(urs_control *h, double decel) {
-  URS_GUARD(h, { return taken(h, h->ctl->servoStop(decel), "RTDEControlInterface::servoStop returned false"); })
+  URS_GUARD(h, {
+    URS_REQUIRE_LINK(h);
+    return taken(h, h->ctl->servoStop(decel), "RTDEControlInterface::servoStop returned false");
+  })
 }
 
 int urs_control_speed_stop(urs_control *h, double decel) {
-  URS_GUARD(h, { return taken(h, h->ctl->speedStop(decel), "RTDEControlInterface::speedStop returned false"); })
+  URS_GUARD(h, {
+    URS_REQUIRE_LINK(h);
+    return taken(h, h->ctl->speedStop(decel), "RTDEControlInterface::speedStop returned false");
+  })
 }
 
 int urs_control_stop_j(urs_control *h, double decel, int asynchronous) {
   URS_GUARD(h, {
+    URS_REQUIRE_LINK(h);
     h->ctl->stopJ(decel, asynchronous != 0);
     return URS_OK;
   })
@@ -200,6 +232,7 @@ int urs_control_stop_j(urs_control *h, double decel, int asynchronous) {
 
 int urs_control_stop_script(urs_control *h) {
   URS_GUARD(h, {
+    URS_REQUIRE_LINK(h);
     h->ctl->stopScript();
     return URS_OK;
   })

@@ -15,7 +15,8 @@
 //! - A stop: the supervisor repeats its Stop every cycle while the arm brakes; ur_rtde's
 //!   `stopJ` waits for the script's "done" (a few controller cycles), so an identical Stop
 //!   that follows a Stop is not sent again (the controller already brakes at that
-//!   deceleration). Any other command is sent every cycle.
+//!   deceleration), nor after ur_rtde refused it (its script is not running, or the robot is
+//!   safety-stopped: the controller holds the arm). Any other command is sent every cycle.
 //! - No program restart after a link loss ([`TrialRobot::restart_program`] is `false`):
 //!   ur_rtde's own reconnect re-uploads its script, which blocks for seconds.
 
@@ -81,12 +82,16 @@ impl Robot for PacedUrRtde {
     }
 
     fn send(&mut self, cmd: &JointCommand) -> robot_io::Result<()> {
-        if matches!(cmd, JointCommand::Stop { .. }) && self.stopping.as_ref() == Some(cmd) {
+        let stop = matches!(cmd, JointCommand::Stop { .. });
+        if stop && self.stopping.as_ref() == Some(cmd) {
             return Ok(());
         }
-        self.robot.send(cmd)?;
-        self.stopping = matches!(cmd, JointCommand::Stop { .. }).then_some(*cmd);
-        Ok(())
+        // A Stop is remembered even when ur_rtde refuses it: it refuses when its script is
+        // not running or the robot is safety-stopped, and then the controller holds the arm
+        // already. The refusal reaches the supervisor once (SAF-REQ-012), instead of ur_rtde
+        // refusing (and printing) 500 times a second.
+        self.stopping = stop.then_some(*cmd);
+        self.robot.send(cmd)
     }
 }
 

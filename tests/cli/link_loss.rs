@@ -8,79 +8,32 @@
 //! the trial has logged a second of robot state. The only fixed wait is the 5 s SIGSTOP the
 //! acceptance asks for.
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{BIN, run_folder, summary};
+use common::{BIN, Emulate, run_folder, summary};
 
 /// Every wait of these tests is bounded by this.
 const DEADLINE: Duration = Duration::from_secs(120);
 
-/// `hrc-adapt emulate --sim` on ephemeral ports; killed when dropped.
-struct Emulate {
-    child: Child,
-    rtde: u16,
-    dashboard: u16,
-    script: u16,
-}
-
-/// The port of `label 127.0.0.1:PORT` in the emulator's start-up line.
-fn port_after(line: &str, label: &str) -> u16 {
-    let rest = &line[line
-        .find(label)
-        .unwrap_or_else(|| panic!("{label} in {line}"))
-        + label.len()..];
-    let addr = rest.trim_start().split([',', ' ', ';']).next().unwrap();
-    addr.rsplit(':').next().unwrap().parse().unwrap()
-}
-
-impl Emulate {
-    fn start() -> Emulate {
-        let mut child = Command::new(BIN)
-            .args(["emulate", "--sim", "--speedup", "1"])
-            .args(["--rtde-port", "0", "--dashboard-port", "0"])
-            .args(["--secondary-port", "0", "--realtime-port", "0"])
-            .env("RUST_LOG", "warn")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("start hrc-adapt emulate");
-        let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-        let line = loop {
-            let line = lines.next().expect("the emulator exited").unwrap();
-            if line.starts_with("emulating a UR controller") {
-                break line;
-            }
-        };
-        // Keep draining stderr so the emulator never blocks on a full pipe.
-        std::thread::spawn(move || lines.for_each(drop));
-        Emulate {
-            rtde: port_after(&line, "rtde"),
-            dashboard: port_after(&line, "dashboard"),
-            script: port_after(&line, "script"),
-            child,
-        }
-    }
-
-    fn signal(&self, sig: &str) {
-        let ok = Command::new("kill")
-            .args([sig, &self.child.id().to_string()])
-            .status()
-            .unwrap()
-            .success();
-        assert!(ok, "kill {sig}");
-    }
-}
-
-impl Drop for Emulate {
-    fn drop(&mut self) {
-        let _ = self.child.kill(); // SIGKILL works on a stopped process too
-        let _ = self.child.wait();
-    }
+/// `hrc-adapt emulate --sim` on ephemeral ports, in real time.
+fn emulate_sim() -> Emulate {
+    Emulate::start(&[
+        "--sim",
+        "--speedup",
+        "1",
+        "--rtde-port",
+        "0",
+        "--dashboard-port",
+        "0",
+        "--secondary-port",
+        "0",
+        "--realtime-port",
+        "0",
+    ])
 }
 
 /// The trial config of these tests: a 6 s L1 trial whose first fetch starts at once, and
@@ -113,9 +66,9 @@ impl Trial {
             .arg(link_config(dir, resume))
             .arg("--out-root")
             .arg(&out_root)
-            .args(["--rtde-port", &emu.rtde.to_string()])
-            .args(["--dashboard-port", &emu.dashboard.to_string()])
-            .args(["--script-port", &emu.script.to_string()])
+            .args(["--rtde-port", &emu.port("rtde").to_string()])
+            .args(["--dashboard-port", &emu.port("dashboard").to_string()])
+            .args(["--script-port", &emu.port("script").to_string()])
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -180,7 +133,7 @@ fn task_events(dir: &Path) -> Vec<String> {
 #[test]
 fn sigstop_5_s_with_resume_the_trial_resumes_and_completes() {
     let tmp = tempfile::tempdir().unwrap();
-    let emu = Emulate::start();
+    let emu = emulate_sim();
     let mut trial = Trial::start(&emu, tmp.path(), true);
     trial.wait_until_running();
     emu.signal("-STOP");
@@ -202,7 +155,7 @@ fn sigstop_5_s_with_resume_the_trial_resumes_and_completes() {
 #[test]
 fn sigstop_without_resume_ends_as_link_lost_with_exit_code_3() {
     let tmp = tempfile::tempdir().unwrap();
-    let emu = Emulate::start();
+    let emu = emulate_sim();
     let mut trial = Trial::start(&emu, tmp.path(), false);
     trial.wait_until_running();
     emu.signal("-STOP");
@@ -222,7 +175,7 @@ fn sigstop_without_resume_ends_as_link_lost_with_exit_code_3() {
 #[test]
 fn sigkill_ends_as_link_lost_with_exit_code_3() {
     let tmp = tempfile::tempdir().unwrap();
-    let emu = Emulate::start();
+    let emu = emulate_sim();
     let mut trial = Trial::start(&emu, tmp.path(), false);
     trial.wait_until_running();
     emu.signal("-KILL");

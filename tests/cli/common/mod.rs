@@ -3,7 +3,7 @@
 
 #![allow(dead_code)] // each test binary uses its own part
 
-use std::io::Read;
+use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
@@ -75,15 +75,22 @@ pub(crate) fn wait(mut child: Child) -> (ExitStatus, String, String) {
 /// Runs `hrc-adapt trial` with `args` to its end and returns its exit status, stdout and
 /// stderr.
 pub(crate) fn trial(args: &[&str]) -> (ExitStatus, String, String) {
+    let mut all = vec!["trial"];
+    all.extend_from_slice(args);
+    run(&all)
+}
+
+/// Runs `hrc-adapt` with `args` (a subcommand first) to its end: exit status, stdout and
+/// stderr.
+pub(crate) fn run(args: &[&str]) -> (ExitStatus, String, String) {
     let child = Command::new(BIN)
-        .arg("trial")
         .args(args)
         .env("RUST_LOG", "warn")
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .expect("start hrc-adapt trial");
+        .expect("start hrc-adapt");
     wait(child)
 }
 
@@ -111,4 +118,75 @@ pub(crate) fn run_folder(stdout: &str, stderr: &str) -> PathBuf {
 /// `summary.json` of a run folder.
 pub(crate) fn summary(dir: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+/// `hrc-adapt emulate` with `args` as a separate process, ready once it prints that it
+/// serves; killed (SIGKILL) when dropped.
+pub(crate) struct Emulate {
+    /// The emulator process.
+    pub(crate) child: Child,
+    /// Its start-up line ("emulating a UR controller … rtde 127.0.0.1:PORT, …").
+    pub(crate) line: String,
+}
+
+impl Emulate {
+    /// Starts `hrc-adapt emulate <args>` and waits until it serves. An emulator that exits
+    /// first (a port taken, a bad trace) panics with everything it printed.
+    pub(crate) fn start(args: &[&str]) -> Emulate {
+        let mut child = Command::new(BIN)
+            .arg("emulate")
+            .args(args)
+            .env("RUST_LOG", "warn")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start hrc-adapt emulate");
+        let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+        let mut seen = Vec::new();
+        let line = loop {
+            match lines.next() {
+                Some(Ok(line)) if line.starts_with("emulating a UR controller") => break line,
+                Some(Ok(line)) => seen.push(line),
+                _ => {
+                    let status = child.wait();
+                    panic!(
+                        "hrc-adapt emulate {args:?} exited before serving ({status:?}):\n{}",
+                        seen.join("\n")
+                    );
+                }
+            }
+        };
+        // Keep draining stderr so the emulator never blocks on a full pipe.
+        std::thread::spawn(move || lines.for_each(drop));
+        Emulate { child, line }
+    }
+
+    /// The port of `label ADDR:PORT` in the start-up line (`rtde`, `dashboard`, `script`).
+    pub(crate) fn port(&self, label: &str) -> u16 {
+        let line = &self.line;
+        let at = line
+            .find(label)
+            .unwrap_or_else(|| panic!("{label} in {line}"));
+        let rest = &line[at + label.len()..];
+        let addr = rest.trim_start().split([',', ' ', ';']).next().unwrap();
+        addr.rsplit(':').next().unwrap().parse().unwrap()
+    }
+
+    /// Sends `sig` (`-STOP`, `-CONT`, `-USR1`, …) to the emulator.
+    pub(crate) fn signal(&self, sig: &str) {
+        let ok = Command::new("kill")
+            .args([sig, &self.child.id().to_string()])
+            .status()
+            .unwrap()
+            .success();
+        assert!(ok, "kill {sig}");
+    }
+}
+
+impl Drop for Emulate {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
 }
