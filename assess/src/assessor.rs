@@ -11,7 +11,7 @@ use crate::error::Result;
 use crate::evidence::{hand_evidence, orientation_evidence};
 use crate::filter::OneEuro3;
 use crate::hesitation::SpeedSamples;
-use crate::window::{FrameContribution, Totals, Window};
+use crate::window::{FrameContribution, Totals, Window, seconds_to_ns};
 
 const NS_PER_S: f64 = 1e9;
 
@@ -326,8 +326,8 @@ impl Assessor {
         // --- §7 hesitation ---
         let h_cfg = &self.cfg.hesitation;
         let speed = active.and_then(|h| self.hands[h as usize].speed);
-        self.samples.expire(t);
-        let v_th = if (self.samples.sum_dt_ns() as f64) < h_cfg.min_sample_time_s * NS_PER_S {
+        self.samples.expire(t_ns);
+        let v_th = if self.samples.sum_dt_ns() < seconds_to_ns(h_cfg.min_sample_time_s) {
             h_cfg.v_max_m_s
         } else {
             let med = self.samples.median().unwrap_or(f64::INFINITY);
@@ -345,7 +345,7 @@ impl Assessor {
             if self.run_counting {
                 hesitating = true;
                 self.totals.hes_ns += dt_ns;
-            } else if self.run_ns as f64 >= h_cfg.min_duration_s * NS_PER_S {
+            } else if self.run_ns >= seconds_to_ns(h_cfg.min_duration_s) {
                 // The run reached t_min: its whole length counts, retroactively.
                 self.run_counting = true;
                 hesitating = true;
@@ -357,12 +357,12 @@ impl Assessor {
             self.run_counting = false;
         }
         if c && let Some(v) = speed {
-            self.samples.push(t, v, dt_ns);
+            self.samples.push(t_ns, v, dt_ns);
         }
 
         // --- §4 integrals, cumulative and windowed ---
         let contribution = FrameContribution {
-            t,
+            t_ns,
             dt_ns,
             valid,
             state: f.map_or(self.ws.len(), |a| a.0) as u16,
@@ -422,7 +422,7 @@ impl Assessor {
             &mut out.area_demand_windowed,
         );
         self.dominant
-            .update(t, &out.windowed.components(), valid, &mut out.dominant);
+            .update(t_ns, &out.windowed.components(), valid, &mut out.dominant);
         &self.out
     }
 
@@ -503,10 +503,16 @@ impl Assessor {
 fn orientation(position: Vec3, facing: Vec3, confidence: f64, c_min: f64) -> Option<Orientation> {
     let finite =
         position.iter().chain(facing.iter()).all(|v| v.is_finite()) && confidence.is_finite();
-    let norm = facing.norm();
-    (finite && norm > 1e-9 && confidence >= c_min).then(|| Orientation {
+    // Any non-zero length is a direction (MODEL.md): scaled by its largest component first,
+    // so that a tiny vector's squares do not underflow to a zero norm.
+    let largest = facing.amax();
+    if !(finite && largest > 0.0 && confidence >= c_min) {
+        return None;
+    }
+    let scaled = facing / largest;
+    Some(Orientation {
         position,
-        facing: facing / norm,
+        facing: scaled / scaled.norm(),
         confidence: confidence.min(1.0),
     })
 }
@@ -583,4 +589,33 @@ fn indicators(
     out.collaboration_time_s = t_collab;
     out.ab_valid_time_s = tot.ab_valid_ns as f64 / NS_PER_S;
     out.ab_inconsistent_time_s = tot.ab_inconsistent_ns as f64 / NS_PER_S;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// MODEL.md / README: a facing vector of any non-zero length is a direction. a077dd5
+    /// dropped one of length ≤ 1e-9 as missing; a length of 1e-200 squares to 0 in floating
+    /// point, so the direction is scaled before it is normalised.
+    #[test]
+    fn a_facing_vector_of_any_non_zero_length_is_used() {
+        let p = Vec3::new(0.0, 0.0, 1.0);
+        for len in [1.0, 1e-9, 1e-12, 1e-200, 5e-324] {
+            let o = orientation(p, Vec3::new(0.0, len, 0.0), 0.9, 0.5)
+                .unwrap_or_else(|| panic!("length {len:e} dropped"));
+            assert_eq!(o.facing, Vec3::new(0.0, 1.0, 0.0), "length {len:e}");
+        }
+        let o = orientation(p, Vec3::new(3e-200, 4e-200, 0.0), 0.9, 0.5).unwrap();
+        assert!((o.facing - Vec3::new(0.6, 0.8, 0.0)).norm() < 1e-15);
+        assert!(
+            orientation(p, Vec3::zeros(), 0.9, 0.5).is_none(),
+            "zero: no direction"
+        );
+        assert!(orientation(p, Vec3::new(f64::NAN, 1.0, 0.0), 0.9, 0.5).is_none());
+        assert!(
+            orientation(p, Vec3::new(0.0, 1.0, 0.0), 0.4, 0.5).is_none(),
+            "c < c_min"
+        );
+    }
 }

@@ -6,8 +6,8 @@
 /// One frame's contributions to the integrals.
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct FrameContribution {
-    /// Frame time [s].
-    pub(crate) t: f64,
+    /// Frame time, rounded to whole nanoseconds [ns].
+    pub(crate) t_ns: i64,
     /// Δt_k [ns].
     pub(crate) dt_ns: i64,
     /// v_F.
@@ -78,6 +78,11 @@ impl Totals {
     }
 }
 
+/// `s` [s] rounded to whole nanoseconds [ns] (durations from the config, absolute frame times).
+pub(crate) fn seconds_to_ns(s: f64) -> i64 {
+    (s * 1e9).round() as i64
+}
+
 /// The frames with t_now − t_k < H, and their totals.
 #[derive(Debug, Clone)]
 pub(crate) struct Window {
@@ -85,7 +90,8 @@ pub(crate) struct Window {
     /// Sequence number of the oldest frame in the ring.
     oldest_seq: u64,
     len: usize,
-    horizon_s: f64,
+    /// H [ns].
+    horizon_ns: i64,
     pub(crate) totals: Totals,
     /// Number of switch events in the window (to reset the cost sum to exactly 0 when none).
     switches: u64,
@@ -99,7 +105,7 @@ impl Window {
             ring: vec![FrameContribution::default(); cap],
             oldest_seq: 0,
             len: 0,
-            horizon_s,
+            horizon_ns: seconds_to_ns(horizon_s),
             totals: Totals::new(n_areas),
             switches: 0,
             overflowed: false,
@@ -126,7 +132,9 @@ impl Window {
 
     /// Drop the frames that left the window at time `t_now`, then add frame number `seq`.
     pub(crate) fn push(&mut self, seq: u64, f: FrameContribution) {
-        while self.len > 0 && f.t - self.ring[self.slot(self.oldest_seq)].t >= self.horizon_s {
+        // Exact: t_now − t_k ≥ H in whole nanoseconds (MODEL.md: every time comparison).
+        while self.len > 0 && f.t_ns - self.ring[self.slot(self.oldest_seq)].t_ns >= self.horizon_ns
+        {
             self.evict_oldest();
         }
         if self.len == self.ring.len() {
@@ -155,5 +163,49 @@ impl Window {
                 self.totals.hes_ns += f.dt_ns;
             }
         }
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+
+    /// The age of frame `k` on frame `k_now` of a 25 fps stream as a float difference of
+    /// absolute times, k_now · 0.04 − k · 0.04 [s]: what a077dd5 compared.
+    pub(crate) fn float_age(k_now: u32, k: u32) -> f64 {
+        f64::from(k_now) * 0.04 - f64::from(k) * 0.04
+    }
+
+    /// Frame k of a 25 fps stream, with its time as a camera clock gives it: k · 0.04 [s].
+    fn frame_25fps(k: u32, switch_cost: f64) -> FrameContribution {
+        FrameContribution {
+            t_ns: seconds_to_ns(f64::from(k) * 0.04),
+            dt_ns: 40_000_000,
+            valid: true,
+            switch_cost,
+            ..FrameContribution::default()
+        }
+    }
+
+    /// Worked example (by hand), MODEL.md "every time comparison is exact": on a 25 fps stream
+    /// a switch on frame 53 (t = 2.12 s) is exactly H = 30 s old on frame 803 (t = 32.12 s),
+    /// so it has left the window there: windowed switch cost 0, where frame 802 still holds
+    /// it. In floating point 803 · 0.04 − 53 · 0.04 = 29.999999999999996 < 30, and the
+    /// comparison on a077dd5 kept the switch (win_asd_ctx 0.033 instead of 0).
+    #[test]
+    fn a_switch_exactly_h_old_has_left_the_window() {
+        assert!(float_age(803, 53) < 30.0, "the float difference is below H");
+        let mut w = Window::new(4, 30.0, 30.0);
+        for k in 0..=802 {
+            w.push(
+                u64::from(k),
+                frame_25fps(k, if k == 53 { 1.0 } else { 0.0 }),
+            );
+        }
+        assert_eq!(w.totals.switch_cost, 1.0, "29.96 s old: still in");
+        w.push(803, frame_25fps(803, 0.0));
+        assert_eq!(w.totals.switch_cost, 0.0, "exactly 30 s old: out");
+        // The window then holds frames 54..=803: 750 frames of 40 ms, exactly 30 s.
+        assert_eq!(w.totals.valid_ns, 30_000_000_000);
     }
 }
