@@ -4,11 +4,14 @@
 //! (feature `vision`) streams camera frames from a video file, an image folder, a RealSense
 //! `.bag` or a live camera through the landmark pipeline and the cue extractor
 //! (`crate::vision_cmd`). It runs the [`Assessor`] over every frame, and writes into `--out`:
-//! - `indicators.csv`, one row per frame (columns in [`report::table`]);
+//! - `indicators.csv`, one row per frame (columns in [`report::table`]; reals with 6 decimals,
+//!   or with `--precision full` the shortest text that reads back bit for bit);
 //! - the indicator-dynamics plots, four panels and a combined figure ([`report::plot`]);
 //! - `assess_config.toml`, the model configuration in force (every key);
-//! - for camera inputs: `cues.csv` (the `assess::io::cue_csv` format, so the run can be
-//!   assessed again without the video) and `landmarks.csv` (`crate::vision_cmd::LandmarkCsv`).
+//! - `cues.csv`, the cues assessed, for every input (the `assess::io::cue_csv` format at full
+//!   precision: `assess --cues <out>/cues.csv` with the same workspace and config reproduces
+//!   `indicators.csv` byte for byte; a KTH folder's derived cues, a video's extracted ones);
+//! - for camera inputs: `landmarks.csv` (`crate::vision_cmd::LandmarkCsv`).
 //!   **Privacy**: these hold landmarks and cues only; the camera image is written only to the
 //!   `--annotate` path, and only when it is given.
 //!
@@ -51,7 +54,8 @@ pub struct AssessArgs {
     /// Cues: a cue CSV file, a KTH handover folder, a video file (.mp4 .avi .mkv .mov), an
     /// image folder, a RealSense .bag (feature `realsense`), `camera` (a RealSense camera if
     /// built with `realsense` and one is connected, else the first webcam) or `webcam:N`.
-    /// Camera inputs write landmarks.csv and cues.csv, never images, unless --annotate is given.
+    /// Every input writes the cues assessed to cues.csv; camera inputs also landmarks.csv, never
+    /// images, unless --annotate is given.
     #[arg(long)]
     cues: PathBuf,
     /// Workspace calibration TOML.
@@ -66,6 +70,10 @@ pub struct AssessArgs {
     /// Replace an existing non-empty output folder.
     #[arg(long)]
     force: bool,
+    /// Real values in indicators.csv: `6` decimals (default) or `full`, the shortest text
+    /// that reads back to the same f64 (to check the model to the last bit).
+    #[arg(long, value_enum, default_value = "6")]
+    precision: crate::report::table::Precision,
     /// Options for camera inputs (video, images, .bag, camera).
     #[command(flatten)]
     vision: VisionArgs,
@@ -157,7 +165,12 @@ impl std::fmt::Debug for Run {
 }
 
 impl Run {
-    fn new(workspace: Workspace, cfg: AssessConfig, out: &Path) -> crate::Result<Self> {
+    fn new(
+        workspace: Workspace,
+        cfg: AssessConfig,
+        out: &Path,
+        precision: crate::report::table::Precision,
+    ) -> crate::Result<Self> {
         // The assessor owns its workspace; the table needs the area names while `update`'s
         // result is borrowed.
         let names = workspace.clone();
@@ -166,8 +179,8 @@ impl Run {
         let staging = Staging::new(out)?;
         let table_path = staging.path().join(TABLE_FILE);
         let file = fs::File::create(&table_path).map_err(Error::io("create", &table_path))?;
-        let table =
-            IndicatorTable::new(BufWriter::new(file)).map_err(Error::csv("write", &table_path))?;
+        let table = IndicatorTable::with_precision(BufWriter::new(file), precision)
+            .map_err(Error::csv("write", &table_path))?;
         Ok(Self {
             names,
             assessor,
@@ -304,13 +317,22 @@ fn assess(args: &AssessArgs) -> crate::Result<Report> {
     if frames.is_empty() {
         return Err(Error::data(args.cues.display(), "holds no frames"));
     }
-    let mut run = Run::new(workspace, cfg, &args.out)?;
+    let mut run = Run::new(workspace, cfg, &args.out, args.precision)?;
     let progress = progress_bar(Some(frames.len() as u64));
     for frame in &frames {
         run.push(frame)?;
         progress.inc(1);
     }
-    run.finish(args, args.cues.display().to_string(), &progress, Vec::new())
+    // The cues assessed, at full precision, for every input (a KTH folder's are derived here):
+    // `assess --cues <out>/cues.csv` reproduces indicators.csv byte for byte.
+    let cues_path = run.staging.path().join(CUES_FILE);
+    assess::io::cue_csv::write(&cues_path, &frames)?;
+    run.finish(
+        args,
+        args.cues.display().to_string(),
+        &progress,
+        vec![PathBuf::from(CUES_FILE)],
+    )
 }
 
 #[cfg(not(feature = "vision"))]
@@ -356,7 +378,7 @@ fn assess_camera(
         opened.intrinsics_override(v.camera.intrinsics)?,
     )?;
     let overlay_ws = workspace.clone();
-    let mut run = Run::new(workspace, cfg, &args.out)?;
+    let mut run = Run::new(workspace, cfg, &args.out, args.precision)?;
     let mut landmarks = LandmarkCsv::create(&run.staging.path().join(LANDMARKS_FILE))?;
     // The annotated view goes into the staging folder when it is asked for inside `--out`.
     let annotate_path = v
@@ -773,6 +795,7 @@ mod tests {
             config: None,
             out: dir.path().join("results"),
             force: false,
+            precision: Default::default(),
             vision: VisionArgs::default(),
         };
         Setup { dir, args }
@@ -795,7 +818,11 @@ mod tests {
         let report = assess(&s.args).unwrap();
         assert_eq!(report.frames, 300);
 
-        let mut want = vec![TABLE_FILE.to_string(), CONFIG_FILE.to_string()];
+        let mut want = vec![
+            TABLE_FILE.to_string(),
+            CONFIG_FILE.to_string(),
+            CUES_FILE.to_string(),
+        ];
         want.extend(plot::FILES.iter().map(|f| f.to_string()));
         want.sort();
         assert_eq!(names(&s.args.out), want);
@@ -872,6 +899,7 @@ mod tests {
             config: a.config.clone(),
             out: a.out.clone(),
             force: a.force,
+            precision: a.precision,
             vision: a.vision.clone(),
         }
     }
@@ -988,6 +1016,7 @@ mod tests {
             config: None,
             out: dir.path().join("kth"),
             force: false,
+            precision: Default::default(),
             vision: VisionArgs::default(),
         };
         let report = assess(&args).unwrap();
@@ -996,6 +1025,55 @@ mod tests {
         assert!((report.duration_s - 800.0 / 120.0).abs() < 1e-9);
         let text = fs::read_to_string(args.out.join(TABLE_FILE)).unwrap();
         assert_eq!(text.lines().count(), 802);
+    }
+
+    /// Issue 13: `assess` writes the cues it assessed (here the ones it derived from a KTH
+    /// folder), and `assess --cues <that cues.csv>` reproduces indicators.csv byte for byte,
+    /// at 6 decimals and at full precision. Full precision writes what reads back bit for bit.
+    #[test]
+    fn its_cues_csv_reproduces_indicators_csv_byte_for_byte() {
+        use crate::report::table::Precision;
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let dir = tempfile::tempdir().unwrap();
+        for precision in [Precision::Fixed6, Precision::Full] {
+            let first = AssessArgs {
+                cues: root.join("data/human-motion/kth-handover"),
+                workspace: root.join("config/kth-handover-workspace.toml"),
+                config: None,
+                out: dir.path().join(format!("kth-{precision:?}")),
+                force: false,
+                precision,
+                vision: VisionArgs::default(),
+            };
+            assess(&first).unwrap();
+            let again = AssessArgs {
+                cues: first.out.join(CUES_FILE),
+                out: dir.path().join(format!("again-{precision:?}")),
+                ..clone_args(&first)
+            };
+            assess(&again).unwrap();
+            let a = fs::read(first.out.join(TABLE_FILE)).unwrap();
+            let b = fs::read(again.out.join(TABLE_FILE)).unwrap();
+            assert!(a == b, "{precision:?}: indicators.csv differs");
+            // And the cues read back are the frames the KTH reader derived, bit for bit.
+            let derived =
+                assess::io::kth::read_taker(&first.cues, &assess::io::kth::KthOptions::default())
+                    .unwrap();
+            let written = assess::io::cue_csv::read(&again.cues).unwrap();
+            assert_eq!(derived, written);
+        }
+        // Full precision: the times of the 120 Hz recording are not 6-decimal numbers.
+        let full = fs::read_to_string(dir.path().join("kth-Full").join(TABLE_FILE)).unwrap();
+        let t1 = full.lines().nth(2).unwrap().split(',').next().unwrap();
+        let six = fs::read_to_string(dir.path().join("kth-Fixed6").join(TABLE_FILE)).unwrap();
+        let t1_six = six.lines().nth(2).unwrap().split(',').next().unwrap();
+        assert_ne!(t1, t1_six, "full {t1} vs 6 decimals {t1_six}");
+        let derived = assess::io::kth::read_taker(
+            &root.join("data/human-motion/kth-handover"),
+            &assess::io::kth::KthOptions::default(),
+        )
+        .unwrap();
+        assert_eq!(t1.parse::<f64>().unwrap().to_bits(), derived[1].t.to_bits());
     }
 }
 
@@ -1045,6 +1123,7 @@ mod vision_tests {
             config: None,
             out: out.to_path_buf(),
             force: false,
+            precision: Default::default(),
             vision,
         }
     }
@@ -1109,7 +1188,7 @@ mod vision_tests {
         let report = assess(&args(&s.images, &s.workspace, &out, still())).unwrap();
         assert_eq!(report.frames, 3);
 
-        // Exactly the CSV path's files plus cues.csv and landmarks.csv: no camera image
+        // Exactly the CSV path's files (cues.csv among them) plus landmarks.csv: no camera image
         // (the only PNGs are the plots).
         let mut want = vec![
             TABLE_FILE.to_string(),
