@@ -82,12 +82,12 @@ fn tracking_agrees_with_mediapipe_video_mode_and_skips_detectors() {
         );
         let pose = w["pose"].as_array().unwrap();
         let e = worst_ref(&lm.pose.as_ref().unwrap().points[..25], &pose[..25]);
-        // The tracked pose ROI comes from smoothed auxiliary landmarks; mediapipe's exact
-        // smoothing (its object-scale source) is not replicated, so after the first tracked
-        // frame the bound is 12 % (measured worst 10.6 %), not 8 %. Upper body (0–24) only:
-        // the legs of this sitting person swing with any ROI change.
-        let frac = if k < 2 { 0.08 } else { 0.12 };
-        let tol = frac * span(pose, 11, 12);
+        // The tracked pose ROI comes from the smoothed auxiliary landmarks, with mediapipe
+        // 0.10.21's object scale (2·|aux34 − aux33|): every frame within the photo tolerance
+        // of 8 % (measured worst 3.5 px, 2.2 %, frame 9; with the body's bounding box as the
+        // scale it was 10.6 %). Upper body (0–24) only: the legs of this sitting person swing
+        // with any ROI change.
+        let tol = 0.08 * span(pose, 11, 12);
         println!("frame {k}: pose {e:.2} px (tolerance {tol:.2})");
         assert!(
             e <= tol,
@@ -170,4 +170,68 @@ fn staggered_rates_skip_models_but_keep_landmarks() {
     assert_eq!(runs.face_landmarks, 6, "{runs:?}");
     assert!((12..=13).contains(&runs.hand_landmarks), "{runs:?}");
     assert_eq!(runs.pose_landmarks, 12);
+}
+
+/// `img` pasted at column `x0` of a black canvas of `width` × img.height.
+fn canvas_with(width: u32, parts: &[(&RgbImage, u32)]) -> RgbImage {
+    let h = parts.first().map_or(1, |p| p.0.height);
+    let mut out = RgbImage::black(width, h);
+    for (img, x0) in parts {
+        let (w, iw) = (width as usize * 3, img.width as usize * 3);
+        for y in 0..img.height as usize {
+            let dst = y * w + *x0 as usize * 3;
+            out.data[dst..dst + iw].copy_from_slice(&img.data[y * iw..(y + 1) * iw]);
+        }
+    }
+    out
+}
+
+/// Issue 13, operator identity: the seated operator on the left of a 1920 × 640 frame; from
+/// frame 4 a second person (the same photo) is on the right. Tracking keeps the operator.
+/// From frame 8 the operator is gone: within OPERATOR_MEMORY_S (1 s) the second person is
+/// refused and no pose is reported (the operator is lost, for SAF-REQ-008's staleness to
+/// handle); once the memory has expired, the second person is the operator.
+#[test]
+fn a_second_person_entering_never_takes_over_the_operator() {
+    use assess::vision::pipeline::OPERATOR_MEMORY_S;
+    let img = RgbImage::read(
+        &PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/images/pose_sitting.jpg"),
+    )
+    .unwrap();
+    let alone = canvas_with(1920, &[(&img, 0)]);
+    let both = canvas_with(1920, &[(&img, 0), (&img, 960)]);
+    let other_only = canvas_with(1920, &[(&img, 960)]);
+    let mut p = Pipeline::load(&model_dir(), PipelineConfig::default()).unwrap();
+    let nose_x = |lm: &assess::vision::Landmarks| lm.pose.as_ref().map(|p| p.points[0].x);
+    let dt = 1.0 / 30.0;
+    let mut t = 0.0;
+    for k in 0..8 {
+        let frame = if k < 4 { &alone } else { &both };
+        let lm = p.process_at(t, frame, None).unwrap();
+        let x = nose_x(&lm).unwrap_or_else(|| panic!("frame {k}: no operator"));
+        assert!(
+            x < 960.0,
+            "frame {k}: the pose is at x = {x:.0}, not the operator's"
+        );
+        t += dt;
+    }
+    // The operator leaves; the second person stays.
+    let mut lost_frames = 0;
+    while t < 7.0 * dt + OPERATOR_MEMORY_S - 1e-6 {
+        let lm = p.process_at(t, &other_only, None).unwrap();
+        assert_eq!(
+            nose_x(&lm),
+            None,
+            "t = {t:.3} s: the second person took over"
+        );
+        lost_frames += 1;
+        t += dt;
+    }
+    assert!(lost_frames >= 25, "{lost_frames}");
+    assert!(p.run_counts().others_refused > 0, "{:?}", p.run_counts());
+    // Past the memory: the second person is the operator now.
+    t += dt;
+    let lm = p.process_at(t, &other_only, None).unwrap();
+    let x = nose_x(&lm).expect("after the memory, the person in view is the operator");
+    assert!(x > 960.0, "x = {x:.0}");
 }

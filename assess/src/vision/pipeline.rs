@@ -140,6 +140,29 @@ pub struct RunCounts {
     pub face_landmarks: u64,
     /// Hand landmark model runs.
     pub hand_landmarks: u64,
+    /// Pose candidates refused because they were not where the operator was lost, within
+    /// [`OPERATOR_MEMORY_S`] of losing them (another person never takes over).
+    pub others_refused: u64,
+}
+
+/// How long after losing the operator only a person where they were may become the operator
+/// again [s]. Later, the ranking of [`rank_operators`] alone decides.
+pub const OPERATOR_MEMORY_S: f64 = 1.0;
+
+/// Pose candidates tried in turn on one detection, best first, until one has its landmarks
+/// present ([`PipelineConfig::min_presence_score`]).
+const MAX_CANDIDATES: usize = 3;
+
+/// Where the operator's body was last seen: the pose's auxiliary landmark 33 (body centre)
+/// [px], its body scale 2·|aux34 − aux33| [px] and the frame time [s].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OperatorMemory {
+    /// Body centre [px].
+    pub centre: [f64; 2],
+    /// Body scale [px].
+    pub scale: f64,
+    /// Frame time [s].
+    pub t: f64,
 }
 
 /// MediaPipe's One-Euro filter as its `LandmarksSmoothingCalculator` applies it (not the
@@ -634,6 +657,8 @@ pub struct Pipeline {
     runs: RunCounts,
     /// Smoothing of the pose's auxiliary landmarks 33, 34 (x, y each).
     aux_filters: [MpOneEuro; 4],
+    /// Where the operator was last seen.
+    operator: Option<OperatorMemory>,
     /// Time of the previous frame [s].
     last_t: Option<f64>,
     /// Time of the current frame [s].
@@ -695,6 +720,7 @@ impl Pipeline {
             )?,
             config,
             pose_rect: None,
+            operator: None,
             face_rect: None,
             last_face: None,
             hands: [HandTrack::default(), HandTrack::default()],
@@ -742,6 +768,7 @@ impl Pipeline {
     /// Forgets all tracking state (the next frame runs the detectors).
     pub fn reset(&mut self) {
         self.pose_rect = None;
+        self.operator = None;
         self.aux_filters = [MpOneEuro::default(); 4];
         self.face_rect = None;
         self.last_face = None;
@@ -794,58 +821,81 @@ impl Pipeline {
         Ok(out)
     }
 
+    /// The operator's pose: tracked from the previous frame's ROI, or, when there is none or
+    /// it lost the person, detected: the candidates of [`rank_operators`] in turn (at most
+    /// [`MAX_CANDIDATES`]) until one has its landmarks present.
     fn pose(
         &mut self,
         image: &RgbImage,
         depth: Option<&DepthImage>,
     ) -> Result<Option<PoseLandmarks>> {
         let size = (image.width, image.height);
-        for attempt in 0..2 {
-            let rect = match self.pose_rect {
-                Some(r) => r,
-                None => {
-                    let t = Instant::now();
-                    let dets = self.pose_detector.detect(image)?;
-                    self.runs.pose_detector += 1;
-                    self.times.pose_detection_us += micros(t);
-                    let Some(d) = choose_operator(&dets, size, depth) else {
-                        return Ok(None);
-                    };
-                    let Some(r) = rect_from_alignment(d, size, 0, 1, 90.0) else {
-                        return Ok(None);
-                    };
-                    r.transformed(&POSE_ROI, size)
-                }
+        // Tracked; when the tracked region lost the person, detect again at once.
+        if let Some(rect) = self.pose_rect
+            && let Some(p) = self.pose_in(image, &rect, size)?
+        {
+            return Ok(Some(p));
+        }
+        let t = Instant::now();
+        let dets = self.pose_detector.detect(image)?;
+        self.runs.pose_detector += 1;
+        self.times.pose_detection_us += micros(t);
+        let recent = self
+            .operator
+            .filter(|o| self.now - o.t <= OPERATOR_MEMORY_S);
+        let ranked = rank_operators(&dets, size, depth, recent.as_ref());
+        self.runs.others_refused += (dets.len() - ranked.len()) as u64;
+        for &i in ranked.iter().take(MAX_CANDIDATES) {
+            let Some(r) = rect_from_alignment(&dets[i], size, 0, 1, 90.0) else {
+                continue;
             };
-            let t = Instant::now();
-            let (raw, flag, _) = self.pose_model.run(image, &rect)?;
-            self.runs.pose_landmarks += 1;
-            self.times.pose_landmarks_us += micros(t);
-            if flag < self.config.min_presence_score || raw.len() < 39 * 5 {
-                // Lost: detect again at once (a tracked ROI) or give up (a detected one).
-                let was_tracking = self.pose_rect.take().is_some();
-                if was_tracking && attempt == 0 {
-                    continue;
-                }
-                return Ok(None);
+            let rect = r.transformed(&POSE_ROI, size);
+            if let Some(p) = self.pose_in(image, &rect, size)? {
+                return Ok(Some(p));
             }
-            let all = self.pose_model.project(&raw, &rect, size, true);
-            // Auxiliary landmarks 33 (body centre) and 34 (scale), smoothed, give the next ROI.
-            self.pose_rect = if self.config.mode == Mode::Tracking {
-                let aux = self.smooth_aux(&all, size);
-                rect_from_points_opt(&aux, 0, 1, size).map(|r| r.transformed(&POSE_ROI, size))
-            } else {
-                None
-            };
-            let mut points = [Landmark::default(); 33];
-            points.copy_from_slice(&all[..33]);
-            return Ok(Some(PoseLandmarks {
-                points,
-                score: f64::from(flag),
-                roi: rect.to_pixels(size),
-            }));
         }
         Ok(None)
+    }
+
+    /// The pose landmarks in `rect`, or `None` when the person is not present there (the
+    /// tracked ROI is then dropped). On success, the next frame's ROI (tracking) and the
+    /// operator's memory are updated.
+    fn pose_in(
+        &mut self,
+        image: &RgbImage,
+        rect: &NormRect,
+        size: (u32, u32),
+    ) -> Result<Option<PoseLandmarks>> {
+        let t = Instant::now();
+        let (raw, flag, _) = self.pose_model.run(image, rect)?;
+        self.runs.pose_landmarks += 1;
+        self.times.pose_landmarks_us += micros(t);
+        if flag < self.config.min_presence_score || raw.len() < 39 * 5 {
+            self.pose_rect = None;
+            return Ok(None);
+        }
+        let all = self.pose_model.project(&raw, rect, size, true);
+        // Auxiliary landmarks 33 (body centre) and 34 (scale), smoothed, give the next ROI.
+        self.pose_rect = if self.config.mode == Mode::Tracking {
+            let aux = self.smooth_aux(&all, size);
+            rect_from_points_opt(&aux, 0, 1, size).map(|r| r.transformed(&POSE_ROI, size))
+        } else {
+            None
+        };
+        if let (Some(c), Some(s)) = (all.get(33), all.get(34)) {
+            self.operator = Some(OperatorMemory {
+                centre: [c.x, c.y],
+                scale: 2.0 * (s.x - c.x).hypot(s.y - c.y),
+                t: self.now,
+            });
+        }
+        let mut points = [Landmark::default(); 33];
+        points.copy_from_slice(&all[..33]);
+        Ok(Some(PoseLandmarks {
+            points,
+            score: f64::from(flag),
+            roi: rect.to_pixels(size),
+        }))
     }
 
     /// The auxiliary landmarks 33 and 34, smoothed as MediaPipe does, normalised.
@@ -857,15 +907,12 @@ impl Pipeline {
             Some(last) if self.now > last => 1.0 / (self.now - last),
             _ => 30.0,
         };
-        // Object scale: mean of the bounding-box sides of the 33 body landmarks [px].
-        let body = &all[..33.min(all.len())];
-        let (x0, x1) = body.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
-            (lo.min(p.x), hi.max(p.x))
-        });
-        let (y0, y1) = body.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
-            (lo.min(p.y), hi.max(p.y))
-        });
-        let scale = ((x1 - x0) + (y1 - y0)) / 2.0;
+        // Object scale [px]: as mediapipe 0.10.21's compiled pose graph takes it, from the
+        // crop the two auxiliary landmarks define: a square centred on aux 33 whose side is
+        // twice the distance to aux 34, so (width + height) / 2 = 2·|aux34 − aux33| (not the
+        // bounding box of the 33 body landmarks, which moved our crop centre 3.6 px from
+        // mediapipe's on moving video; issue 13).
+        let scale = 2.0 * (b.x - a.x).hypot(b.y - a.y);
         if scale < 1e-6 {
             return normalised(&[*a, *b], size);
         }
@@ -1118,23 +1165,67 @@ fn nearest_to(dets: &[Detection], size: (u32, u32), p: [f64; 2]) -> Option<&Dete
     dets.iter().min_by(|a, b| dist(a).total_cmp(&dist(b)))
 }
 
-/// The operator among several detections: the nearest by median depth inside the box when
-/// depth is given and valid there, else the largest box (in pixels).
+/// The operator among several detections: the first of [`rank_operators`] with no memory.
 pub fn choose_operator<'a>(
     dets: &'a [Detection],
     size: (u32, u32),
     depth: Option<&DepthImage>,
 ) -> Option<&'a Detection> {
-    if let Some(depth) = depth {
-        let nearest = dets
-            .iter()
-            .filter_map(|d| box_median_depth(d, size, depth).map(|z| (d, z)))
-            .min_by(|a, b| a.1.total_cmp(&b.1));
-        if let Some((d, _)) = nearest {
-            return Some(d);
-        }
+    rank_operators(dets, size, depth, None)
+        .first()
+        .and_then(|&i| dets.get(i))
+}
+
+/// The detections that may be the operator, best first (indices into `dets`).
+///
+/// The rule:
+/// 1. With `recent` (the operator was lost less than [`OPERATOR_MEMORY_S`] ago): only the
+///    candidates whose box centre is within one body scale of where the operator was, nearest
+///    first. Anyone else is refused: a person walking by does not take over.
+/// 2. With depth valid inside the box (`depth`, aligned to the image): the nearest person
+///    first (median depth of the box), then those without valid depth.
+/// 3. Otherwise, and among equal depths: by detector score × body size, the square root of
+///    the box area [px]. The score dominates when the boxes are about equally large (as
+///    mediapipe, which takes the highest-scoring detection), and a clearly larger (nearer)
+///    body wins over a slightly better score.
+pub fn rank_operators(
+    dets: &[Detection],
+    size: (u32, u32),
+    depth: Option<&DepthImage>,
+    recent: Option<&OperatorMemory>,
+) -> Vec<usize> {
+    let (w, h) = (f64::from(size.0), f64::from(size.1));
+    let centre = |d: &Detection| {
+        [
+            f64::from(d.xmin + d.width / 2.0) * w,
+            f64::from(d.ymin + d.height / 2.0) * h,
+        ]
+    };
+    let key = |d: &Detection| {
+        let area_px = f64::from(d.width) * w * f64::from(d.height) * h;
+        f64::from(d.score) * area_px.max(0.0).sqrt()
+    };
+    let mut order: Vec<(usize, f64, f64)> = dets
+        .iter()
+        .enumerate()
+        .map(|(i, d)| {
+            let z = depth
+                .and_then(|depth| box_median_depth(d, size, depth))
+                .unwrap_or(f64::INFINITY);
+            (i, z, key(d))
+        })
+        .collect();
+    if let Some(o) = recent {
+        let dist = |i: usize| {
+            let c = centre(&dets[i]);
+            (c[0] - o.centre[0]).hypot(c[1] - o.centre[1])
+        };
+        order.retain(|&(i, _, _)| dist(i) <= o.scale.max(1.0));
+        order.sort_by(|a, b| dist(a.0).total_cmp(&dist(b.0)));
+        return order.into_iter().map(|(i, _, _)| i).collect();
     }
-    dets.iter().max_by(|a, b| a.area().total_cmp(&b.area()))
+    order.sort_by(|a, b| a.1.total_cmp(&b.1).then(b.2.total_cmp(&a.2)));
+    order.into_iter().map(|(i, _, _)| i).collect()
 }
 
 /// Median valid depth [m] on a grid of up to 15 × 15 samples inside a detection box.
@@ -1160,4 +1251,104 @@ fn box_median_depth(d: &Detection, size: (u32, u32), depth: &DepthImage) -> Opti
     }
     samples.sort_by(f64::total_cmp);
     samples.get(samples.len() / 2).copied()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A detection with its box [px] on a 640 × 480 image.
+    fn det(score: f32, x: f32, y: f32, w: f32, h: f32) -> Detection {
+        Detection {
+            score,
+            xmin: x / 640.0,
+            ymin: y / 480.0,
+            width: w / 640.0,
+            height: h / 480.0,
+            keypoints: Vec::new(),
+        }
+    }
+
+    const SIZE: (u32, u32) = (640, 480);
+
+    /// Issue 13's two failures of "the largest box": boxes of 5471 and 5472 px² (a man and a
+    /// woman) and of 2638 and 2639 px² (two riders, the larger one with score 0.55). Both go to
+    /// the higher detector score, as mediapipe's: 0.9 · √5471 = 66.6 > 0.6 · √5472 = 44.4.
+    #[test]
+    fn nearly_equal_boxes_go_to_the_higher_score() {
+        let dets = [
+            det(0.6, 300.0, 10.0, 72.0, 76.0),
+            det(0.9, 10.0, 10.0, 5471.0 / 76.0, 76.0),
+        ];
+        assert_eq!(rank_operators(&dets, SIZE, None, None), [1, 0]);
+        let riders = [
+            det(0.55, 0.0, 0.0, 2639.0 / 50.0, 50.0),
+            det(0.90, 300.0, 0.0, 52.76, 50.0),
+        ];
+        assert_eq!(rank_operators(&riders, SIZE, None, None), [1, 0]);
+        assert!(std::ptr::eq(
+            choose_operator(&riders, SIZE, None).unwrap(),
+            &riders[1]
+        ));
+    }
+
+    /// A clearly larger body wins over a slightly better score: 0.8 · √(200·300) = 196 >
+    /// 0.9 · √(100·150) = 110.
+    #[test]
+    fn a_clearly_larger_body_wins_over_a_slightly_better_score() {
+        let dets = [
+            det(0.9, 0.0, 0.0, 100.0, 150.0),
+            det(0.8, 300.0, 0.0, 200.0, 300.0),
+        ];
+        assert_eq!(rank_operators(&dets, SIZE, None, None), [1, 0]);
+    }
+
+    /// With depth, the nearest person first, whatever the scores; a box without valid depth
+    /// comes after those with it.
+    #[test]
+    fn with_depth_the_nearest_comes_first() {
+        let mut data = vec![0u16; 640 * 480];
+        for (i, d) in data.iter_mut().enumerate() {
+            let x = i % 640;
+            *d = match x {
+                0..200 => 1500,
+                200..400 => 900,
+                _ => 0, // no depth
+            };
+        }
+        let depth = DepthImage {
+            width: 640,
+            height: 480,
+            data,
+            scale_m: 0.001,
+        };
+        let dets = [
+            det(0.99, 10.0, 10.0, 150.0, 200.0),  // 1.5 m
+            det(0.60, 220.0, 10.0, 150.0, 200.0), // 0.9 m
+            det(0.99, 450.0, 10.0, 150.0, 200.0), // no depth
+        ];
+        assert_eq!(rank_operators(&dets, SIZE, Some(&depth), None), [1, 0, 2]);
+    }
+
+    /// Within OPERATOR_MEMORY_S of losing the operator, only a candidate where they were (box
+    /// centre within one body scale) may become the operator; another person is refused even
+    /// with a better score and a larger box.
+    #[test]
+    fn a_person_walking_by_does_not_take_over() {
+        let was = OperatorMemory {
+            centre: [100.0, 200.0],
+            scale: 120.0,
+            t: 0.0,
+        };
+        let passer = det(0.99, 300.0, 0.0, 300.0, 400.0); // centre (450, 200): 350 px away
+        let operator = det(0.60, 40.0, 120.0, 100.0, 150.0); // centre (90, 195): 11 px away
+        let dets = [passer.clone(), operator];
+        assert_eq!(rank_operators(&dets, SIZE, None, Some(&was)), [1]);
+        assert_eq!(
+            rank_operators(&[passer], SIZE, None, Some(&was)),
+            Vec::<usize>::new()
+        );
+        // Without the memory the passer ranks first.
+        assert_eq!(rank_operators(&dets, SIZE, None, None), [0, 1]);
+    }
 }
