@@ -202,6 +202,7 @@ fn record_with_ur_rtde(args: &RecordArgs) -> crate::Result<()> {
                     // No consistent sample this poll; the next poll tries again, and a
                     // sample it misses is counted below.
                     tracing::warn!("{e}");
+                    std::thread::sleep(Duration::from_micros(250));
                     continue;
                 }
             }
