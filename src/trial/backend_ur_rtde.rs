@@ -16,7 +16,8 @@
 //!   `stopJ` waits for the script's "done" (a few controller cycles), so an identical Stop
 //!   that follows a Stop is not sent again (the controller already brakes at that
 //!   deceleration), nor after ur_rtde refused it (its script is not running, or the robot is
-//!   safety-stopped: the controller holds the arm). Any other command is sent every cycle.
+//!   safety-stopped: the controller holds the arm), except when the link was down. Any other
+//!   command is sent every cycle.
 //! - No program restart after a link loss ([`TrialRobot::restart_program`] is `false`):
 //!   ur_rtde's own reconnect re-uploads its script, which blocks for seconds.
 
@@ -89,9 +90,14 @@ impl Robot for PacedUrRtde {
         // A Stop is remembered even when ur_rtde refuses it: it refuses when its script is
         // not running or the robot is safety-stopped, and then the controller holds the arm
         // already. The refusal reaches the supervisor once (SAF-REQ-012), instead of ur_rtde
-        // refusing (and printing) 500 times a second.
+        // refusing (and printing) 500 times a second. Not on a link that is down (refused at
+        // once by the shim): that Stop is sent again next cycle, in case the link returns.
         self.stopping = stop.then_some(*cmd);
-        self.robot.send(cmd)
+        let sent = self.robot.send(cmd);
+        if matches!(sent, Err(robot_io::RobotIoError::LinkDown { .. })) {
+            self.stopping = None;
+        }
+        sent
     }
 }
 
