@@ -41,8 +41,7 @@ use report::table::IndicatorTable;
 const TABLE_FILE: &str = "indicators.csv";
 /// The configuration in force, inside `--out`.
 const CONFIG_FILE: &str = "assess_config.toml";
-/// Camera inputs: the cues, in the cue CSV format, inside `--out`.
-#[cfg(feature = "vision")]
+/// The cues assessed (every input), in the cue CSV format, inside `--out`.
 const CUES_FILE: &str = "cues.csv";
 /// Camera inputs: the landmarks, inside `--out`.
 #[cfg(feature = "vision")]
