@@ -83,6 +83,10 @@ pub struct Assessor {
     last_t: Option<(f64, i64)>,
     /// Δt_max [ns].
     dt_max_ns: i64,
+    /// The median's minimum sample time [ns] (§7).
+    min_sample_ns: i64,
+    /// t_min [ns] (§7).
+    t_min_ns: i64,
     seq: u64,
     last_area: Option<AreaId>,
     totals: Totals,
@@ -158,7 +162,9 @@ impl Assessor {
             yaw_next: 0,
             yaw_len: 0,
             last_t: None,
-            dt_max_ns: (cfg.demand.max_frame_interval_s * NS_PER_S).round() as i64,
+            dt_max_ns: seconds_to_ns(cfg.demand.max_frame_interval_s),
+            min_sample_ns: seconds_to_ns(cfg.hesitation.min_sample_time_s),
+            t_min_ns: seconds_to_ns(cfg.hesitation.min_duration_s),
             seq: 0,
             last_area: None,
             totals: Totals::new(n),
@@ -212,7 +218,7 @@ impl Assessor {
         // Integrals use differences of absolute times rounded to whole nanoseconds, so the
         // sum of the Δt over any run of frames equals the run's duration to ±1 ns, with no
         // rounding error accumulating (e.g. nine frames at 30 fps are exactly 0.3 s).
-        let t_ns = (t * NS_PER_S).round() as i64;
+        let t_ns = seconds_to_ns(t);
         let dt_ns = match self.last_t {
             None => 0,
             Some((_, prev_ns)) => (t_ns - prev_ns).clamp(0, self.dt_max_ns),
@@ -327,7 +333,7 @@ impl Assessor {
         let h_cfg = &self.cfg.hesitation;
         let speed = active.and_then(|h| self.hands[h as usize].speed);
         self.samples.expire(t_ns);
-        let v_th = if self.samples.sum_dt_ns() < seconds_to_ns(h_cfg.min_sample_time_s) {
+        let v_th = if self.samples.sum_dt_ns() < self.min_sample_ns {
             h_cfg.v_max_m_s
         } else {
             let med = self.samples.median().unwrap_or(f64::INFINITY);
@@ -345,7 +351,7 @@ impl Assessor {
             if self.run_counting {
                 hesitating = true;
                 self.totals.hes_ns += dt_ns;
-            } else if self.run_ns >= seconds_to_ns(h_cfg.min_duration_s) {
+            } else if self.run_ns >= self.t_min_ns {
                 // The run reached t_min: its whole length counts, retroactively.
                 self.run_counting = true;
                 hesitating = true;

@@ -21,19 +21,7 @@ const DEADLINE: Duration = Duration::from_secs(120);
 
 /// `hrc-adapt emulate --sim` on ephemeral ports, in real time.
 fn emulate_sim() -> Emulate {
-    Emulate::start(&[
-        "--sim",
-        "--speedup",
-        "1",
-        "--rtde-port",
-        "0",
-        "--dashboard-port",
-        "0",
-        "--secondary-port",
-        "0",
-        "--realtime-port",
-        "0",
-    ])
+    Emulate::start_on_port(&["--sim", "--speedup", "1"], 0)
 }
 
 /// The trial config of these tests: a 6 s L1 trial whose first fetch starts at once, and

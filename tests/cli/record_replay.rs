@@ -105,21 +105,10 @@ fn write_source(path: &Path) {
 /// `hrc-adapt emulate --trace <csv>` on `addr` with RTDE on `rtde_port` (0: an ephemeral
 /// port) and the other ports ephemeral.
 fn emulate_trace(csv: &Path, addr: &str, rtde_port: u16) -> Emulate {
-    let rtde_port = rtde_port.to_string();
-    Emulate::start(&[
-        "--trace",
-        csv.to_str().unwrap(),
-        "--bind",
-        addr,
-        "--rtde-port",
-        &rtde_port,
-        "--dashboard-port",
-        "0",
-        "--secondary-port",
-        "0",
-        "--realtime-port",
-        "0",
-    ])
+    Emulate::start_on_port(
+        &["--trace", csv.to_str().unwrap(), "--bind", addr],
+        rtde_port,
+    )
 }
 
 /// `hrc-adapt record` from `addr:port` into `out` with `backend`, stopped by SIGINT (as
@@ -326,30 +315,22 @@ fn ur_rtde_records_a_replay_of_a_native_recording_bit_for_bit() {
 
 #[test]
 fn ur_rtde_record_refuses_fields_and_ports_it_cannot_honour() {
-    let (status, _, stderr) = common::run(&[
-        "record",
-        "--robot",
-        "127.0.0.1",
-        "--out",
-        "/dev/null",
-        "--robot-backend",
-        "ur_rtde",
-        "--fields",
-        "timestamp,actual_q",
-    ]);
-    assert!(!status.success());
-    assert!(stderr.contains("--robot-backend native"), "{stderr}");
-    let (status, _, stderr) = common::run(&[
-        "record",
-        "--robot",
-        "127.0.0.1",
-        "--out",
-        "/dev/null",
-        "--robot-backend",
-        "ur_rtde",
-        "--port",
-        "31004",
-    ]);
-    assert!(!status.success());
-    assert!(stderr.contains("30004"), "{stderr}");
+    for (option, value, named) in [
+        ("--fields", "timestamp,actual_q", "--robot-backend native"),
+        ("--port", "31004", "30004"),
+    ] {
+        let (status, _, stderr) = common::run(&[
+            "record",
+            "--robot",
+            "127.0.0.1",
+            "--out",
+            "/dev/null",
+            "--robot-backend",
+            "ur_rtde",
+            option,
+            value,
+        ]);
+        assert!(!status.success(), "{option} {value}");
+        assert!(stderr.contains(named), "{option} {value}: {stderr}");
+    }
 }

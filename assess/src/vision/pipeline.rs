@@ -885,7 +885,7 @@ impl Pipeline {
         if let (Some(c), Some(s)) = (all.get(33), all.get(34)) {
             self.operator = Some(OperatorMemory {
                 centre: [c.x, c.y],
-                scale: 2.0 * (s.x - c.x).hypot(s.y - c.y),
+                scale: body_scale(c, s),
                 t: self.now,
             });
         }
@@ -912,7 +912,7 @@ impl Pipeline {
         // twice the distance to aux 34, so (width + height) / 2 = 2·|aux34 − aux33| (not the
         // bounding box of the 33 body landmarks, which moved our crop centre 3.6 px from
         // mediapipe's on moving video; issue 13).
-        let scale = 2.0 * (b.x - a.x).hypot(b.y - a.y);
+        let scale = body_scale(a, b);
         if scale < 1e-6 {
             return normalised(&[*a, *b], size);
         }
@@ -1163,6 +1163,12 @@ fn nearest_to(dets: &[Detection], size: (u32, u32), p: [f64; 2]) -> Option<&Dete
         (cx - p[0]).hypot(cy - p[1])
     };
     dets.iter().min_by(|a, b| dist(a).total_cmp(&dist(b)))
+}
+
+/// The body scale of the pose's auxiliary landmarks 33 (`centre`) and 34 (`scale_point`) [px]:
+/// the side of the square crop they define, 2·|aux34 − aux33|, as mediapipe 0.10.21 takes it.
+fn body_scale(centre: &Landmark, scale_point: &Landmark) -> f64 {
+    2.0 * (scale_point.x - centre.x).hypot(scale_point.y - centre.y)
 }
 
 /// The operator among several detections: the first of [`rank_operators`] with no memory.

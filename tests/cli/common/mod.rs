@@ -162,6 +162,24 @@ impl Emulate {
         Emulate { child, line }
     }
 
+    /// [`Emulate::start`] with RTDE on `rtde_port` (0: an ephemeral port, as [`Emulate::port`]
+    /// then reads it) and the dashboard, secondary and real-time ports ephemeral.
+    pub(crate) fn start_on_port(args: &[&str], rtde_port: u16) -> Emulate {
+        let rtde_port = rtde_port.to_string();
+        let mut all = args.to_vec();
+        all.extend_from_slice(&[
+            "--rtde-port",
+            &rtde_port,
+            "--dashboard-port",
+            "0",
+            "--secondary-port",
+            "0",
+            "--realtime-port",
+            "0",
+        ]);
+        Emulate::start(&all)
+    }
+
     /// The port of `label ADDR:PORT` in the start-up line (`rtde`, `dashboard`, `script`).
     pub(crate) fn port(&self, label: &str) -> u16 {
         let line = &self.line;
