@@ -1101,6 +1101,8 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
             // No new sample now: the supervisor keeps the previous state and counts the
             // missed cycle (SAF-REQ-009).
             let fresh = cc.read(last_ts).context("reading the robot state failed")?;
+            // The newest sample shows our control program stopped (controller clock only).
+            let mut program_stopped = false;
             if fresh {
                 last_ts = cc.state.timestamp_s;
             }
@@ -1203,13 +1205,11 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
                     }
                     if fresh && cc.state.runtime_state != robot_io::runtime_state::PLAYING {
                         // The control program stopped (watchdog, protective stop, pendant):
-                        // nothing we send moves the robot any more.
-                        reason = reason::ROBOT_PROGRAM_STOPPED;
-                        detail = Some(format!(
-                            "the robot's control program stopped at t = {t:.3} s (runtime state {})",
-                            cc.state.runtime_state
-                        ));
-                        break;
+                        // nothing we send moves the robot any more. This cycle still goes
+                        // through the supervisor, which judges the sample that shows it (a
+                        // protective stop arrives with the paused program in one sample:
+                        // SAF-REQ-010 is counted here), and the loop ends after it.
+                        program_stopped = true;
                     }
                     (t - prev_t).max(CYCLE_S)
                 }
@@ -1301,6 +1301,18 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
             if released {
                 link.released(t, log)?;
                 done += 1;
+            }
+            if program_stopped {
+                reason = reason::ROBOT_PROGRAM_STOPPED;
+                let judged = verdict
+                    .violation()
+                    .map_or_else(|| "passed".to_string(), |v| v.to_string());
+                detail = Some(format!(
+                    "the robot's control program stopped at t = {t:.3} s (runtime state {}; \
+                     the supervisor on that sample: {judged})",
+                    cc.state.runtime_state
+                ));
+                break;
             }
             let intervention = match &verdict {
                 Verdict::Passed => None,

@@ -207,14 +207,19 @@ fn a_protective_stop_stops_the_ur_rtde_trial_through_the_supervisor() {
     let json = summary(&run_folder(&stdout, &stderr));
     // A protective stop ends any program on a controller, ur_rtde's script too: the trial
     // ends as robot_program_stopped (exit code 5) through the exit path, which stops the
-    // robot through the supervisor. Whether the supervisor also counts a SAF-REQ-010
-    // intervention depends on whether the state that shows the stop reaches it before the
-    // state that shows the stopped program (both were seen here), so it is not judged.
+    // robot through the supervisor. The sample that shows the stopped program (it arrives
+    // with the protective stop) is judged by the supervisor first: SAF-REQ-010 halts, in
+    // the raw per-cycle counts.
     assert_eq!(status.code(), Some(5), "{stderr}");
     assert_eq!(json["finish_reason"], "robot_program_stopped", "{json}");
     assert!(stderr.contains("runtime state"), "{stderr}");
     assert!(
         json["completion_time_s"].as_f64().unwrap() < 19.0,
         "the trial ran on to its end: {json}"
+    );
+    let saf010 = &json["motion"]["interventions"]["by_requirement"]["SAF-REQ-010"];
+    assert!(
+        saf010["halted"].as_u64().unwrap() >= 1,
+        "the supervisor never judged the protective stop (SAF-REQ-010): {json}"
     );
 }
