@@ -176,8 +176,13 @@ impl<R: Robot> Supervisor<R> {
                 Ok(())
             }
             Err(e) => {
+                // Logged once per run of failures (a link that is down fails every cycle, 500
+                // lines a second); every failure still reaches the caller and the staleness
+                // count.
+                if self.last_read_ok {
+                    tracing::warn!(error = %e, "reading the robot state failed (logged once until a read succeeds)");
+                }
                 self.last_read_ok = false;
-                tracing::warn!(error = %e, "reading the robot state failed");
                 Err(SafetyError::Robot(e))
             }
         }

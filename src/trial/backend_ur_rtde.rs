@@ -18,6 +18,15 @@
 //!   deceleration), nor after ur_rtde refused it (its script is not running, or the robot is
 //!   safety-stopped: the controller holds the arm), except when the link was down. Any other
 //!   command is sent every cycle.
+//! - A silent link (no new sample: a pulled cable, a stalled controller) must not block the
+//!   control cycle in ur_rtde, whose stopJ waits for the script's "done" on the last state
+//!   received for up to 300 s, and whose servoJ/speedJ wait up to 3 s for "ready" on it and
+//!   write to a socket whose peer may have stopped reading. So, by the age of the newest
+//!   sample: under [`STALE_AFTER`] a Stop is stopJ; from it on a Stop is speedJ to zero at the
+//!   same deceleration (it does not wait for "done"); from [`SILENT_AFTER`] on every command
+//!   is refused at once as [`robot_io::RobotIoError::LinkDown`] without calling ur_rtde (the
+//!   supervisor latches SAF-REQ-012; nothing reaches the robot then anyway).
+//!   Test: `sigstop_of_the_emulator_ends_the_ur_rtde_trial_as_link_lost_without_blocking`.
 //! - No program restart after a link loss ([`TrialRobot::restart_program`] is `false`):
 //!   ur_rtde's own reconnect re-uploads its script, which blocks for seconds.
 
@@ -34,6 +43,36 @@ use robot_io::{JointCommand, Robot, RobotState, UrRtdeConfig, UrRtdeRobot};
 use super::backend::{RtdeGuard, SampleSource, UR_PERIOD, paced_read, rtde_runtime, sample_wait};
 use super::config::{EmulatorSection, RealtimeConfig};
 use super::runtime::TrialRobot;
+
+/// From this age of the newest sample on, a Stop is sent as speedJ to zero instead of stopJ
+/// (see the module docs) [s]: two UR periods, before the supervisor's staleness stop
+/// (SAF-REQ-009, after 3 stale cycles).
+pub(crate) const STALE_AFTER: Duration = Duration::from_millis(4);
+/// From this age of the newest sample on, every command is refused as a link that is down
+/// (see the module docs) [s]: 50 UR periods, far above a late sample and far below the
+/// trial's link-loss declaration (`[link] lost_after_s`, 1 s by default).
+pub(crate) const SILENT_AFTER: Duration = Duration::from_millis(100);
+
+/// What a command becomes at a given age of the newest sample (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Route {
+    /// Sent as it is (a Stop as stopJ).
+    AsIs,
+    /// A Stop, sent as speedJ to zero at its deceleration.
+    StopBySpeed,
+    /// Refused: the link is silent.
+    Refuse,
+}
+
+fn route(cmd: &JointCommand, age: Option<Duration>) -> Route {
+    match age {
+        Some(a) if a >= SILENT_AFTER => Route::Refuse,
+        Some(a) if a >= STALE_AFTER && matches!(cmd, JointCommand::Stop { .. }) => {
+            Route::StopBySpeed
+        }
+        _ => Route::AsIs,
+    }
+}
 
 /// A [`UrRtdeRobot`] paced on the controller timestamp (see the module docs).
 pub(crate) struct PacedUrRtde {
@@ -92,8 +131,25 @@ impl Robot for PacedUrRtde {
         // already. The refusal reaches the supervisor once (SAF-REQ-012), instead of ur_rtde
         // refusing (and printing) 500 times a second. Not on a link that is down (refused at
         // once by the shim): that Stop is sent again next cycle, in case the link returns.
-        self.stopping = stop.then_some(*cmd);
-        let sent = self.robot.send(cmd);
+        let age = self.last_fresh.map(|t| t.elapsed());
+        let sent = match (route(cmd, age), cmd) {
+            (Route::Refuse, _) => Err(robot_io::RobotIoError::LinkDown {
+                reason: std::borrow::Cow::Borrowed(
+                    "no new robot state for 100 ms: the command is not handed to ur_rtde, \
+                     which would wait on the silent link",
+                ),
+            }),
+            (Route::StopBySpeed, JointCommand::Stop { decel }) => {
+                self.robot.send(&JointCommand::Speed {
+                    qd: [0.0; 6],
+                    acc: *decel,
+                })
+            }
+            _ => {
+                self.stopping = stop.then_some(*cmd);
+                self.robot.send(cmd)
+            }
+        };
         if matches!(sent, Err(robot_io::RobotIoError::LinkDown { .. })) {
             self.stopping = None;
         }
@@ -180,4 +236,30 @@ pub(crate) fn connect_ur(
     super::backend::check_and_confirm(&rt, host, super::backend::UrPorts::default(), stop)?;
     let robot = connect(host, None, UR_PERIOD)?;
     Ok((robot, RtdeGuard::new(None, rt)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_command_is_routed_by_the_age_of_the_newest_sample() {
+        let stop = JointCommand::Stop { decel: 3.0 };
+        let servo = JointCommand::Servo {
+            q: [0.0; 6],
+            lookahead_s: 0.1,
+            gain: 300.0,
+        };
+        let ms = |x: u64| Some(Duration::from_millis(x));
+        // No sample yet, or a fresh one: as it is.
+        assert_eq!(route(&stop, None), Route::AsIs);
+        assert_eq!(route(&stop, ms(3)), Route::AsIs);
+        // Two periods without a sample: a Stop no longer waits for the script's "done".
+        assert_eq!(route(&stop, ms(4)), Route::StopBySpeed);
+        assert_eq!(route(&servo, ms(4)), Route::AsIs);
+        assert_eq!(route(&servo, ms(99)), Route::AsIs);
+        // 100 ms of silence: nothing is handed to ur_rtde.
+        assert_eq!(route(&stop, ms(100)), Route::Refuse);
+        assert_eq!(route(&servo, ms(100)), Route::Refuse);
+    }
 }

@@ -125,14 +125,15 @@ fn emulate_sim() -> Emulate {
 }
 
 /// `hrc-adapt trial --robot 127.0.0.8 --robot-backend ur_rtde`, confirmed; a 20 s L1 trial
-/// whose first fetch starts at once.
-fn start_trial(dir: &Path) -> (Child, PathBuf) {
+/// whose first fetch starts at once, with `[link] resume = resume`.
+fn start_trial(dir: &Path, resume: bool) -> (Child, PathBuf) {
     let cfg = trial_config(
         dir,
         &[
             ("max_duration_s", "20.0"),
             ("lead_time_s", "60.0"),
-            ("resume", "false"),
+            ("resume", if resume { "true" } else { "false" }),
+            ("resume_within_s", "30.0"),
         ],
     );
     let out_root = dir.join("runs");
@@ -185,7 +186,7 @@ fn sigkill_of_the_emulator_ends_the_ur_rtde_trial_as_link_lost() {
     let _one = serial();
     let dir = tempfile::tempdir().unwrap();
     let emu = emulate_sim();
-    let (mut child, out_root) = start_trial(dir.path());
+    let (mut child, out_root) = start_trial(dir.path(), false);
     wait_until_running(&mut child, &out_root);
     drop(emu); // SIGKILL
     let (status, stdout, stderr) = common::wait(child);
@@ -199,7 +200,7 @@ fn a_protective_stop_stops_the_ur_rtde_trial_through_the_supervisor() {
     let _one = serial();
     let dir = tempfile::tempdir().unwrap();
     let emu = emulate_sim();
-    let (mut child, out_root) = start_trial(dir.path());
+    let (mut child, out_root) = start_trial(dir.path(), false);
     wait_until_running(&mut child, &out_root);
     // A protective stop in the emulator (SIGUSR1: its fault injection, as a collision).
     emu.signal("-USR1");
@@ -222,4 +223,29 @@ fn a_protective_stop_stops_the_ur_rtde_trial_through_the_supervisor() {
         saf010["halted"].as_u64().unwrap() >= 1,
         "the supervisor never judged the protective stop (SAF-REQ-010): {json}"
     );
+}
+
+#[test]
+fn sigstop_of_the_emulator_ends_the_ur_rtde_trial_as_link_lost_without_blocking() {
+    let _one = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let emu = emulate_sim();
+    let (mut child, out_root) = start_trial(dir.path(), false);
+    wait_until_running(&mut child, &out_root);
+    // A silent controller (as a pulled cable): the sockets stay open, nothing arrives.
+    emu.signal("-STOP");
+    let (status, stdout, stderr) = common::wait(child);
+    emu.signal("-CONT");
+    assert_eq!(status.code(), Some(3), "{stderr}");
+    let json = summary(&run_folder(&stdout, &stderr));
+    assert_eq!(json["finish_reason"], "link_lost", "{json}");
+    // The supervisor saw the silence (SAF-REQ-009) and no cycle was held in ur_rtde longer
+    // than the link-loss declaration (1 s): ur_rtde's stopJ waits up to 300 s on a silent
+    // link, which a Stop once did here (a 301 s cycle).
+    let saf009 = &json["motion"]["interventions"]["by_requirement"]["SAF-REQ-009"];
+    assert!(saf009["stopped"].as_u64().unwrap() >= 1, "{json}");
+    let worst_us = json["motion"]["cycles"]["latency_us"]["max"]
+        .as_f64()
+        .unwrap();
+    assert!(worst_us < 1e6, "a cycle blocked for {worst_us} us: {json}");
 }

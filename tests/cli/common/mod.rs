@@ -94,14 +94,16 @@ pub(crate) fn run(args: &[&str]) -> (ExitStatus, String, String) {
     wait(child)
 }
 
-/// The run folder the trial printed (the last line on stdout), with every file finished
-/// (ARCHITECTURE.md, "Files a trial leaves").
+/// The run folder the trial printed (the last line on stdout that is a folder: ur_rtde's
+/// threads print to stdout too, "Reconnecting..." after a silent link), with every file
+/// finished (ARCHITECTURE.md, "Files a trial leaves").
 pub(crate) fn run_folder(stdout: &str, stderr: &str) -> PathBuf {
     let dir = PathBuf::from(
         stdout
             .lines()
-            .last()
-            .unwrap_or_else(|| panic!("no run folder printed; stderr: {stderr}")),
+            .rev()
+            .find(|l| Path::new(l).is_dir())
+            .unwrap_or_else(|| panic!("no run folder printed: {stdout}; stderr: {stderr}")),
     );
     for f in [
         "trial.mcap",
