@@ -32,8 +32,23 @@ void copy6(const std::vector<double> &v, double out[6]) {
 
 }  // namespace
 
+// The field names of one read, built once: ur_rtde's getters take the name as a `const char*`
+// literal, which becomes a std::string (allocated past 15 characters) on every call, and
+// return their vector by value. The shim reads ur_rtde's RobotState directly with these
+// keys into vectors of its own, which keep their storage: a read allocates nothing.
+struct Keys {
+  std::string timestamp = "timestamp", actual_q = "actual_q", actual_qd = "actual_qd",
+              target_q = "target_q", target_qd = "target_qd", tcp_pose = "actual_TCP_pose",
+              tcp_speed = "actual_TCP_speed", speed_scaling = "speed_scaling",
+              target_speed_fraction = "target_speed_fraction", robot_mode = "robot_mode",
+              safety_mode = "safety_mode", runtime_state = "runtime_state",
+              robot_status_bits = "robot_status_bits", safety_status_bits = "safety_status_bits";
+};
+
 struct urs_receive {
   std::unique_ptr<ur_rtde::RTDEReceiveInterface> rx;
+  Keys keys;
+  std::vector<double> v = std::vector<double>(6, 0.0);  // reused by every vector field
   char err[kMsg] = {0};
 };
 
@@ -99,40 +114,71 @@ void urs_receive_free(urs_receive *h) {
   }
 }
 
+// The body of urs_receive_read (outside URS_GUARD: a macro argument cannot hold its commas).
+static int read_state(urs_receive *h, urs_state *out) {
+  auto &rx = *h->rx;
+  if (!rx.isConnected()) {
+    put(h->err, kMsg, "RTDEReceiveInterface is not connected");
+    return URS_DISCONNECTED;
+  }
+  // ur_rtde's own state object (replaced on a reconnect, so taken each read). Its receive
+  // thread writes a whole package under the state mutex, but getStateData locks it for one
+  // field: a package arriving between two fields would mix two samples (seen under load: a
+  // row with one sample's timestamp and the next one's joints). Each package has a new
+  // controller timestamp, so the fields are one sample when the timestamp read after them is
+  // the one read before them; otherwise read again. A missing field (not in the recipe) is
+  // an error, not a zero.
+  const auto &st = rx.robot_state();
+  if (!st) {
+    put(h->err, kMsg, "RTDEReceiveInterface has no state yet");
+    return URS_DISCONNECTED;
+  }
+  const Keys &k = h->keys;
+  std::vector<double> &v = h->v;
+  bool ok = true;
+  auto vec6 = [&](const std::string &key, double dst[6]) {
+    ok = st->getStateData(key, v) && ok;
+    copy6(v, dst);
+  };
+  for (int attempt = 0; attempt < 8; ++attempt) {
+    ok = true;
+    double t0 = 0.0, t1 = 0.0;
+    int32_t robot_mode = 0, safety_mode = 0;
+    uint32_t runtime_state = 0, robot_status = 0, safety_status = 0;
+    ok = st->getStateData(k.timestamp, t0) && ok;
+    vec6(k.actual_q, out->actual_q);
+    vec6(k.actual_qd, out->actual_qd);
+    vec6(k.target_q, out->target_q);
+    vec6(k.target_qd, out->target_qd);
+    vec6(k.tcp_pose, out->actual_tcp_pose);
+    vec6(k.tcp_speed, out->actual_tcp_speed);
+    ok = st->getStateData(k.speed_scaling, out->speed_scaling) && ok;
+    ok = st->getStateData(k.target_speed_fraction, out->target_speed_fraction) && ok;
+    ok = st->getStateData(k.robot_mode, robot_mode) && ok;
+    ok = st->getStateData(k.safety_mode, safety_mode) && ok;
+    ok = st->getStateData(k.runtime_state, runtime_state) && ok;
+    ok = st->getStateData(k.robot_status_bits, robot_status) && ok;
+    ok = st->getStateData(k.safety_status_bits, safety_status) && ok;
+    ok = st->getStateData(k.timestamp, t1) && ok;
+    if (!ok) {
+      put(h->err, kMsg, "a field of the receive recipe is missing from ur_rtde's state");
+      return URS_REJECTED;
+    }
+    out->robot_mode = robot_mode;
+    out->safety_mode = safety_mode;
+    out->runtime_state = runtime_state;
+    out->robot_status_bits = robot_status;
+    out->safety_status_bits = safety_status;
+    out->timestamp_s = t0;
+    if (t1 == t0) return URS_OK;
+  }
+  put(h->err, kMsg, "the state changed during each of 8 reads (no consistent sample)");
+  return URS_REJECTED;
+}
+
 int urs_receive_read(urs_receive *h, urs_state *out) {
   if (out == nullptr) return URS_BAD_ARGUMENT;
-  URS_GUARD(h, {
-    auto &rx = *h->rx;
-    if (!rx.isConnected()) {
-      put(h->err, kMsg, "RTDEReceiveInterface is not connected");
-      return URS_DISCONNECTED;
-    }
-    // ur_rtde's receive thread writes a whole package under its state mutex, but each getter
-    // locks on its own: a package arriving between two getters would mix two samples (seen
-    // under load: a row with one sample's timestamp and the next one's joints). Each package
-    // has a new controller timestamp, so the fields are one sample when the timestamp read
-    // after them is the one read before them; otherwise read again.
-    for (int attempt = 0; attempt < 8; ++attempt) {
-      const double t0 = rx.getTimestamp();
-      copy6(rx.getActualQ(), out->actual_q);
-      copy6(rx.getActualQd(), out->actual_qd);
-      copy6(rx.getTargetQ(), out->target_q);
-      copy6(rx.getTargetQd(), out->target_qd);
-      copy6(rx.getActualTCPPose(), out->actual_tcp_pose);
-      copy6(rx.getActualTCPSpeed(), out->actual_tcp_speed);
-      out->speed_scaling = rx.getSpeedScaling();
-      out->target_speed_fraction = rx.getTargetSpeedFraction();
-      out->robot_mode = rx.getRobotMode();
-      out->safety_mode = rx.getSafetyMode();
-      out->runtime_state = rx.getRuntimeState();
-      out->robot_status_bits = rx.getRobotStatus();
-      out->safety_status_bits = rx.getSafetyStatusBits();
-      out->timestamp_s = t0;
-      if (rx.getTimestamp() == t0) return URS_OK;
-    }
-    put(h->err, kMsg, "the state changed during each of 8 reads (no consistent sample)");
-    return URS_REJECTED;
-  })
+  URS_GUARD(h, { return read_state(h, out); })
 }
 
 int urs_receive_is_connected(urs_receive *h) { URS_GUARD(h, { return h->rx->isConnected() ? 1 : 0; }) }

@@ -49,8 +49,9 @@ typedef struct urs_state {
  * and writes a NUL-terminated message into err[0..err_len). */
 urs_receive *urs_receive_new(const char *host, double frequency_hz, char *err, size_t err_len);
 void urs_receive_free(urs_receive *h);
-/* The newest sample, all fields from one package (read again while a package arrives
- * between the getters, at most 8 times; URS_REJECTED if the state changed during each). */
+/* The newest sample, all fields from one package (read from ur_rtde's state object field by
+ * field, again while a package arrives in between, at most 8 times; URS_REJECTED if the state
+ * changed during each, or a field is missing). Allocates nothing. */
 int urs_receive_read(urs_receive *h, urs_state *out);
 /* 1 connected, 0 not, negative on failure. */
 int urs_receive_is_connected(urs_receive *h);

@@ -24,14 +24,18 @@
 //!   the RTDE input package to the socket synchronously (a `write` of a few hundred bytes;
 //!   it blocks only when the socket buffer is full). A stop uses `stopJ(decel, asynchronous)`,
 //!   which does not wait for the arm to stop.
-//! - **Allocation.** ur_rtde's getters return `std::vector<double>` by value and look fields
-//!   up by `std::string` name, so **each `read_state` allocates on the C++ heap** (six vectors
-//!   and the name strings that do not fit the small-string buffer). Measured: 20 `malloc`
-//!   calls per read on the reading thread (1000 reads against `hrc-adapt emulate --sim`,
-//!   `robot-io/ffi/tools/alloc_count.c`, a malloc-interposing program). servoJ takes a vector,
-//!   which the shim reuses, but ur_rtde builds its input package in vectors as well. Rust's
-//!   counting allocator does not see C++ `malloc`; this backend does not meet the crate's
-//!   no-allocation rule, unlike [`crate::RtdeRobot`].
+//! - **Allocation.** ur_rtde's getters return `std::vector<double>` by value and build their
+//!   field name as a `std::string` each call (20–21 `malloc` calls per read, measured). The
+//!   shim does not use them: it reads ur_rtde's own state object (`robot_state()`, the
+//!   header-inline `getStateData`) with field names built once and into vectors of its own
+//!   that keep their storage, so **a `read_state` allocates nothing** (0 `malloc` calls over
+//!   1000 reads: `robot-io/ffi/tools/alloc_count.c`, a malloc-interposing program that
+//!   `scripts/test-ur-rtde` builds and runs against `hrc-adapt emulate --sim`, failing on any).
+//!   **`send` does allocate**: ur_rtde's servoJ builds its command and the RTDE input package
+//!   in vectors (31 `malloc` calls per servoJ, same program, reported and not judged), which
+//!   no shim can avoid without reimplementing ur_rtde's control interface. Rust's counting
+//!   allocator does not see C++ `malloc`; on the send side this backend does not meet the
+//!   crate's no-allocation rule, unlike [`crate::RtdeRobot`].
 //! - **Pacing.** [`UrRtdeRobot::init_period`] and [`UrRtdeRobot::wait_period`] are ur_rtde's
 //!   `initPeriod`/`waitPeriod` (a sleep then a spin to the end of the period given at
 //!   construction).
