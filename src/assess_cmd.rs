@@ -375,6 +375,7 @@ fn assess_camera(
         pipeline_config(&v.camera, v.still),
         extrinsics,
         opened.intrinsics_override(v.camera.intrinsics)?,
+        workspace.station(),
     )?;
     let overlay_ws = workspace.clone();
     let mut run = Run::new(workspace, cfg, &args.out, args.precision)?;
@@ -1369,6 +1370,68 @@ mod vision_tests {
             "{e}"
         );
         assert!(!r3.exists());
+    }
+
+    /// The workspace's `[station]` reaches the pipeline: on a frame with two copies of the
+    /// seated person side by side (1920 px wide), the operator is the copy at the station,
+    /// whichever side it is on. No extrinsics, so the workspace frame is the camera frame; the
+    /// station is 2 m out on the ray through the centre of that copy's pose-detector box
+    /// (intrinsics from the default 69° field of view, as the image folder's).
+    #[test]
+    fn the_workspace_station_chooses_the_operator() {
+        use assess::vision::pipeline::{Pipeline, PipelineConfig};
+        use assess::vision::{Intrinsics, models};
+        let s = setup();
+        let img = RgbImage::read(&root().join(PHOTO)).unwrap();
+        let mut both = RgbImage::black(1920, img.height);
+        for x0 in [0usize, 960] {
+            let (w, iw) = (1920 * 3, img.width as usize * 3);
+            for y in 0..img.height as usize {
+                let dst = y * w + x0 * 3;
+                both.data[dst..dst + iw].copy_from_slice(&img.data[y * iw..(y + 1) * iw]);
+            }
+        }
+        let frames = s.dir.path().join("two");
+        fs::create_dir(&frames).unwrap();
+        assess::vision::calib::write_png(&both, frames.join("000000.png")).unwrap();
+        models::init_runtime(None).unwrap();
+        let mut p = Pipeline::load(&models::model_dir(), PipelineConfig::static_images()).unwrap();
+        let people = p.detect_people(&both).unwrap();
+        let intrinsics = Intrinsics::from_hfov(1920, img.height, 69.0);
+        let areas = fs::read_to_string(&s.workspace).unwrap();
+        for left in [true, false] {
+            let d = people
+                .iter()
+                .find(|d| (d.xmin + d.width / 2.0 < 0.5) == left)
+                .unwrap_or_else(|| panic!("no person on the left = {left} side: {people:?}"));
+            let u = f64::from(d.xmin + d.width / 2.0) * 1920.0;
+            let v = f64::from(d.ymin + d.height / 2.0) * f64::from(img.height);
+            let at = intrinsics.deproject(u, v, 2.0);
+            let ws = s.dir.path().join(format!("ws-{left}.toml"));
+            fs::write(
+                &ws,
+                format!(
+                    "{areas}\n[station]\nposition_m = [{}, {}, {}]\nradius_m = 0.5\n",
+                    at.x, at.y, at.z
+                ),
+            )
+            .unwrap();
+            let out = s.dir.path().join(format!("out-{left}"));
+            assess(&args(&frames, &ws, &out, still())).unwrap();
+            let text = fs::read_to_string(out.join(LANDMARKS_FILE)).unwrap();
+            let nose_x: f64 = text
+                .lines()
+                .find(|l| l.starts_with("0,") && l.contains(",pose,0,"))
+                .and_then(|l| l.split(',').nth(4))
+                .unwrap_or_else(|| panic!("no pose on frame 0:\n{text}"))
+                .parse()
+                .unwrap();
+            assert_eq!(
+                nose_x < 960.0,
+                left,
+                "station on the left: {left}; nose at {nose_x}"
+            );
+        }
     }
 
     #[test]

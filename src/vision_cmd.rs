@@ -271,7 +271,7 @@ mod camera {
     use crate::Error;
     use crate::error::ResultExt as _;
     use assess::vision::cues::{CueConfig, CueExtractor, PerceivedCues, load_canonical_face};
-    use assess::vision::pipeline::{Mode, Pipeline, PipelineConfig, Variant};
+    use assess::vision::pipeline::{Mode, Pipeline, PipelineConfig, StationView, Variant};
     use assess::vision::source::capture::{
         VideoFileOptions, VideoFileSource, VideoSink, WebcamOptions, WebcamSource,
     };
@@ -279,7 +279,7 @@ mod camera {
     use assess::vision::{
         CameraFrame, Extrinsics, FrameSource, Intrinsics, Landmarks, RgbImage, draw, models,
     };
-    use assess::{Assessment, Workspace};
+    use assess::{Assessment, Station, Workspace};
 
     use super::{CameraArgs, CueInput, IntrinsicsArg};
 
@@ -560,6 +560,8 @@ mod camera {
         pipeline: Pipeline,
         extractor: CueExtractor,
         intrinsics: Option<FixedIntrinsics>,
+        /// The operator's station (workspace frame).
+        station: Option<Station>,
     }
 
     /// One frame's perception result.
@@ -576,10 +578,13 @@ mod camera {
     impl Perception {
         /// Initialises ONNX Runtime, loads the models from [`models::model_dir`] and the
         /// canonical face. `intrinsics` overrides the sources' (video, images, webcams).
+        /// `station` (the workspace's) makes a person there the preferred operator
+        /// ([`assess::vision::pipeline::rank_operators`]).
         pub(crate) fn load(
             config: PipelineConfig,
             extrinsics: Extrinsics,
             intrinsics: Option<IntrinsicsArg>,
+            station: Option<&Station>,
         ) -> crate::Result<Self> {
             models::init_runtime(None).context("cannot load ONNX Runtime")?;
             let dir = models::model_dir();
@@ -592,6 +597,7 @@ mod camera {
                 pipeline,
                 extractor,
                 intrinsics: intrinsics.map(FixedIntrinsics::new),
+                station: station.copied(),
             })
         }
 
@@ -602,6 +608,10 @@ mod camera {
                 Some(fixed) => fixed.at(frame.index, frame.color.width, frame.color.height)?,
                 None => frame.intrinsics,
             };
+            let station = self.station.as_ref().and_then(|st| {
+                StationView::from_workspace(st, self.extractor.extrinsics(), intrinsics)
+            });
+            self.pipeline.set_station(station);
             let landmarks = self
                 .pipeline
                 .process_at(frame.t, &frame.color, frame.depth.as_ref())

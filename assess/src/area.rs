@@ -18,6 +18,12 @@
 //! size_m = [0.4, 0.4, 0.4]
 //! yaw_deg = 30.0
 //! representative_centre_m = [0.5, 0.6, 1.1]   # optional r_i; default: the box centre
+//!
+//! # Optional: the operator's station, where their torso is while they work. The camera
+//! # front-end then prefers a person there as the operator (`vision::pipeline::rank_operators`).
+//! [station]
+//! position_m = [0.0, 0.0, 1.1]   # [m], workspace frame
+//! radius_m = 0.6                 # [m], in (0, 5]; default 0.6
 //! ```
 
 use std::path::Path;
@@ -160,12 +166,54 @@ pub struct Area {
     pub representative_centre: Vec3,
 }
 
-/// The calibrated workspace: the areas 𝒜 and the diagonal D_ws.
+/// The operator's station: where the operator's torso is while they work, and how far from
+/// it a person still counts as being there. Not part of the model's equations: the camera
+/// front-end uses it to tell the operator from other people in view.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Station {
+    position: Vec3,
+    radius: f64,
+}
+
+impl Station {
+    /// Default [`Station::radius`] [m]: about a seated person's reach around their torso.
+    pub const DEFAULT_RADIUS_M: f64 = 0.6;
+
+    /// A station at `position` [m] (workspace frame) with `radius` [m].
+    ///
+    /// Fails when the position is not finite or the radius is not in (0, 5] m.
+    pub fn new(position: Vec3, radius: f64) -> Result<Self> {
+        if !position.iter().all(|v| v.is_finite()) {
+            return Err(AssessError::invalid("station.position_m", "must be finite"));
+        }
+        if !(radius > 0.0 && radius <= 5.0) {
+            return Err(AssessError::invalid(
+                "station.radius_m",
+                format!("must be in (0, 5] m (got {radius})"),
+            ));
+        }
+        Ok(Self { position, radius })
+    }
+
+    /// Where the operator's torso is while they work [m], workspace frame.
+    pub fn position(&self) -> Vec3 {
+        self.position
+    }
+
+    /// How far from [`Station::position`] a person still counts as at the station [m].
+    pub fn radius(&self) -> f64 {
+        self.radius
+    }
+}
+
+/// The calibrated workspace: the areas 𝒜, the diagonal D_ws and, optionally, the operator's
+/// [`Station`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Workspace {
     areas: Vec<Area>,
     diagonal: f64,
     by_role: [Option<AreaId>; 4],
+    station: Option<Station>,
 }
 
 impl Workspace {
@@ -238,7 +286,20 @@ impl Workspace {
             areas,
             diagonal,
             by_role,
+            station: None,
         })
+    }
+
+    /// This workspace with the operator's station.
+    #[must_use]
+    pub fn with_station(mut self, station: Station) -> Self {
+        self.station = Some(station);
+        self
+    }
+
+    /// The operator's station, when the calibration gives one.
+    pub fn station(&self) -> Option<&Station> {
+        self.station.as_ref()
     }
 
     /// Loads a calibration TOML file (format in the module docs).
@@ -317,6 +378,16 @@ struct RawWorkspace {
     description: Option<String>,
     #[serde(default)]
     area: Vec<RawArea>,
+    #[serde(default)]
+    station: Option<RawStation>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStation {
+    position_m: [f64; 3],
+    #[serde(default)]
+    radius_m: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -392,7 +463,14 @@ impl RawWorkspace {
                 representative_centre,
             });
         }
-        Workspace::new(areas, self.diagonal_m)
+        let ws = Workspace::new(areas, self.diagonal_m)?;
+        Ok(match self.station {
+            Some(st) => ws.with_station(Station::new(
+                Vec3::from(st.position_m),
+                st.radius_m.unwrap_or(Station::DEFAULT_RADIUS_M),
+            )?),
+            None => ws,
+        })
     }
 }
 
@@ -453,6 +531,31 @@ mod tests {
 
         let err = |s: &str| Workspace::from_toml_str(s).unwrap_err().to_string();
         assert!(err("").contains("at least one area"));
+        // The operator's station: optional, its radius defaulted and validated.
+        assert_eq!(ws.station(), None);
+        let area = "[[area]]\nname='a'\nmin_m=[0,0,0]\nmax_m=[1,1,1]\n";
+        let with = |st: &str| Workspace::from_toml_str(&format!("{area}[station]\n{st}"));
+        let st = *with("position_m=[0.1, -0.2, 1.1]")
+            .unwrap()
+            .station()
+            .unwrap();
+        assert_eq!(st.position(), Vec3::new(0.1, -0.2, 1.1));
+        assert_eq!(st.radius(), Station::DEFAULT_RADIUS_M);
+        let st = *with("position_m=[0,0,1]\nradius_m=0.4")
+            .unwrap()
+            .station()
+            .unwrap();
+        assert_eq!(st.radius(), 0.4);
+        for bad in ["radius_m=0", "radius_m=-1", "radius_m=5.5", "radius_m=nan"] {
+            let e = with(&format!("position_m=[0,0,1]\n{bad}"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("station.radius_m"), "{bad}: {e}");
+        }
+        let e = with("position_m=[0,inf,1]").unwrap_err().to_string();
+        assert!(e.contains("station.position_m"), "{e}");
+        let e = with("radius_m=0.5").unwrap_err().to_string();
+        assert!(e.contains("position_m"), "{e}");
         let e = err("[[area]]\nname='a'\nmin_m=[0,0,0]\nmax_m=[1,0,1]");
         assert!(
             e.contains("area[0].max_m") && e.contains("degenerate"),

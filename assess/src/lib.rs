@@ -68,7 +68,7 @@ pub mod spec {}
 pub mod vision;
 mod window;
 
-pub use area::{Area, AreaBox, AreaId, AreaRole, Workspace};
+pub use area::{Area, AreaBox, AreaId, AreaRole, Station, Workspace};
 pub use assessment::{Assessment, Category, Dominant, Indicator, Indicators};
 pub use assessor::Assessor;
 pub use config::{

@@ -235,3 +235,84 @@ fn a_second_person_entering_never_takes_over_the_operator() {
     let x = nose_x(&lm).expect("after the memory, the person in view is the operator");
     assert!(x > 960.0, "x = {x:.0}");
 }
+
+/// Issue 13, rule 2 of `rank_operators`: with the operator's station known (a calibrated
+/// workspace), the person at it is the operator. Two copies of the seated person side by side
+/// (1920 × 640, static images so every frame is decided afresh). The station is put on the ray
+/// through the centre of one copy's pose-detector box; that copy's pose is chosen, whichever side,
+/// and with depth also when the other copy is nearer the camera (0.8 m against 1.5 m), which
+/// without a station wins.
+#[test]
+fn the_person_at_the_operators_station_is_the_operator() {
+    use assess::vision::DepthImage;
+    use assess::vision::pipeline::StationView;
+    let img = RgbImage::read(
+        &PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/images/pose_sitting.jpg"),
+    )
+    .unwrap();
+    let both = canvas_with(1920, &[(&img, 0), (&img, 960)]);
+    let (w, h) = (both.width, both.height);
+    let intrinsics = assess::vision::Intrinsics::from_hfov(w, h, 69.0);
+    let mut p = Pipeline::load(&model_dir(), PipelineConfig::static_images()).unwrap();
+    let people = p.detect_people(&both).unwrap();
+    let centre = |d: &assess::vision::detect::Detection| {
+        (
+            f64::from(d.xmin + d.width / 2.0) * f64::from(w),
+            f64::from(d.ymin + d.height / 2.0) * f64::from(h),
+        )
+    };
+    let on = |left: bool| {
+        let d = people
+            .iter()
+            .find(|d| (centre(d).0 < 960.0) == left)
+            .unwrap_or_else(|| panic!("no person detected on the {left} side: {people:?}"));
+        centre(d)
+    };
+    // The pose's nose [px]. (The face detector, which sees this wide canvas letterboxed to
+    // 128 × 128, finds no face on it; without a pose, faces are ranked by the same
+    // `rank_operators`, unit-tested.)
+    let nose = |p: &mut Pipeline, depth: Option<&DepthImage>| {
+        p.process(&both, depth)
+            .unwrap()
+            .pose
+            .expect("a pose")
+            .points[0]
+            .x
+    };
+    let station = |left: bool, z: f64| {
+        let (u, v) = on(left);
+        StationView::new(intrinsics.deproject(u, v, z), 0.5, intrinsics)
+    };
+    for left in [true, false] {
+        p.set_station(station(left, 2.0));
+        let x = nose(&mut p, None);
+        assert_eq!(
+            x < 960.0,
+            left,
+            "station on the left: {left}; nose at {x:.0}"
+        );
+    }
+
+    let mut data = vec![0u16; (w * h) as usize];
+    for (i, d) in data.iter_mut().enumerate() {
+        *d = if i as u32 % w < 960 { 1500 } else { 800 };
+    }
+    let depth = DepthImage {
+        width: w,
+        height: h,
+        data,
+        scale_m: 0.001,
+    };
+    p.set_station(None);
+    let x = nose(&mut p, Some(&depth));
+    assert!(
+        x > 960.0,
+        "no station: the nearer person, on the right ({x:.0})"
+    );
+    p.set_station(station(true, 1.5));
+    let x = nose(&mut p, Some(&depth));
+    assert!(
+        x < 960.0,
+        "station on the left at 1.5 m: the person there ({x:.0})"
+    );
+}

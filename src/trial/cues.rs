@@ -43,6 +43,9 @@ pub(crate) struct CameraSpec {
     /// Refuse a source without depth (set for a real robot: 2-D-only positions, estimated from
     /// assumed body sizes, are too rough for separation monitoring).
     pub(crate) require_depth: bool,
+    /// The operator's station from the trial's workspace (set when the trial loads it), which
+    /// makes a person there the preferred operator.
+    pub(crate) station: Option<assess::Station>,
 }
 
 /// A recorded cue file being replayed.

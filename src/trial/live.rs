@@ -252,6 +252,7 @@ fn perceive(
         pipeline_config(&spec.camera, false),
         extrinsics,
         opened.intrinsics_override(spec.camera.intrinsics)?,
+        spec.station.as_ref(),
     )?;
     let mut landmarks = LandmarkCsv::create(landmarks_path)?;
     let mut video = match &spec.store_video {
@@ -346,6 +347,7 @@ mod tests {
             camera: CameraArgs::default(),
             store_video,
             require_depth: false,
+            station: None,
         })
     }
 
@@ -539,6 +541,7 @@ mod tests {
                 camera: CameraArgs::default(),
                 store_video: None,
                 require_depth: false,
+                station: None,
             }),
             &dir.path().join("run"),
             &stop,

@@ -395,6 +395,7 @@ pub(crate) fn cue_source(
         camera: camera.clone(),
         store_video: store_video.map(std::path::Path::to_path_buf),
         require_depth: false,
+        station: None, // set from the workspace when the trial loads it
     }))
 }
 

@@ -654,12 +654,15 @@ fn load_setup(
         CueSource::Recorded(p) => Some(RecordedCues::load(p)?),
         CueSource::Simulated | CueSource::Camera(_) => None,
     };
+    let workspace = Workspace::from_toml_file(&cfg.workspace)
+        .with_context(|| format!("workspace {}", cfg.workspace.display()))?;
     let live = match cues {
         #[cfg(feature = "vision")]
         CueSource::Camera(spec) => {
             let spec = super::cues::CameraSpec {
                 require_depth: spec.require_depth
                     || matches!(robot, RobotChoice::Ur { .. } | RobotChoice::UrRtde { .. }),
+                station: workspace.station().copied(),
                 ..spec.clone()
             };
             Some(LiveCues::start(&spec, out_dir)?)
@@ -668,8 +671,6 @@ fn load_setup(
         CueSource::Camera(spec) => return Err(crate::vision_cmd::vision_missing(&spec.input)),
         CueSource::Simulated | CueSource::Recorded(_) => None,
     };
-    let workspace = Workspace::from_toml_file(&cfg.workspace)
-        .with_context(|| format!("workspace {}", cfg.workspace.display()))?;
     let assess_cfg = match &cfg.assess {
         Some(p) => AssessConfig::from_toml_file(p).map_err(|e| Error::from(e).in_file(p))?,
         None => AssessConfig::default(),

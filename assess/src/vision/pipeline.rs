@@ -14,16 +14,20 @@
 //! - in [`Mode::Static`] every frame is independent (MediaPipe's `static_image_mode`): this is
 //!   what the photo tests compare against the official mediapipe 0.10.21 output.
 //!
-//! The pipeline is single-person. Where several people are in view the operator is the
-//! nearest one (median depth in the detection box) or, without depth, the one with the
-//! largest detection box; face and hands are then taken from that person.
+//! The pipeline is single-person. Where several people are in view, [`rank_operators`]
+//! decides who the operator is: someone where the operator was lost a moment ago, else
+//! someone at the operator's station ([`StationView`], from a calibrated workspace), else the
+//! nearest person (median depth in the detection box), else the best detector score × body
+//! size. Face and hands are then taken from that person.
 
 use std::path::Path;
 use std::time::Instant;
 
 use super::anchors::{self, Anchor, AnchorOptions};
 use super::detect::{self, DecodeOptions, Detection};
-use super::frame::{DepthImage, RgbImage};
+use nalgebra::Point3;
+
+use super::frame::{DepthImage, Extrinsics, Intrinsics, RgbImage};
 use super::landmarks::{FaceLandmarks, HandLandmarks, Landmark, Landmarks, PoseLandmarks};
 use super::models::Model;
 use super::roi::{
@@ -163,6 +167,76 @@ pub struct OperatorMemory {
     pub scale: f64,
     /// Frame time [s].
     pub t: f64,
+}
+
+/// The operator's station ([`crate::Station`]) as one frame's camera sees it.
+///
+/// Made per frame by [`StationView::new`] from the station in the camera frame and that
+/// frame's intrinsics, and given to the pipeline with [`Pipeline::set_station`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StationView {
+    /// The station's position in the camera frame [m] (z > 0, in front of the camera).
+    pub camera_m: Point3<f64>,
+    /// How far from it a person still counts as at the station [m].
+    pub radius_m: f64,
+    /// The station projected into the image [px].
+    pub centre_px: [f64; 2],
+    /// The frame's intrinsics (to lift a detection box centre with its depth).
+    pub intrinsics: Intrinsics,
+}
+
+impl StationView {
+    /// The station at `camera_m` [m] (camera frame) with `radius_m` [m], seen with
+    /// `intrinsics`; `None` when it is not in front of the camera (z ≤ 0.05 m), where it cannot
+    /// tell anyone apart.
+    pub fn new(camera_m: Point3<f64>, radius_m: f64, intrinsics: Intrinsics) -> Option<Self> {
+        if !(camera_m.z > 0.05 && radius_m > 0.0) {
+            return None;
+        }
+        let (u, v) = intrinsics.project(&camera_m)?;
+        Some(Self {
+            camera_m,
+            radius_m,
+            centre_px: [u, v],
+            intrinsics,
+        })
+    }
+
+    /// The workspace's `station` seen by a camera with `extrinsics` and `intrinsics`; `None`
+    /// as for [`StationView::new`].
+    pub fn from_workspace(
+        station: &crate::Station,
+        extrinsics: &Extrinsics,
+        intrinsics: Intrinsics,
+    ) -> Option<Self> {
+        let world = Point3::from(station.position());
+        let camera = extrinsics.world_from_camera.inverse_transform_point(&world);
+        Self::new(camera, station.radius(), intrinsics)
+    }
+
+    /// Whether a detection box, with its median depth `z` [m] when valid, is at the station,
+    /// and how far from it:
+    /// - with depth: the box centre lifted to `z` is within `radius_m` of the station (3-D
+    ///   distance [m]);
+    /// - without: the box contains the station's projection (image distance of the box centre
+    ///   to it [px]).
+    fn place(&self, d: &Detection, size: (u32, u32), z: Option<f64>) -> (bool, f64) {
+        let (w, h) = (f64::from(size.0), f64::from(size.1));
+        let (x0, y0) = (f64::from(d.xmin) * w, f64::from(d.ymin) * h);
+        let (x1, y1) = (x0 + f64::from(d.width) * w, y0 + f64::from(d.height) * h);
+        let (u, v) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+        match z {
+            Some(z) => {
+                let dist = (self.intrinsics.deproject(u, v, z) - self.camera_m).norm();
+                (dist <= self.radius_m, dist)
+            }
+            None => {
+                let [cu, cv] = self.centre_px;
+                let inside = (x0..=x1).contains(&cu) && (y0..=y1).contains(&cv);
+                (inside, (u - cu).hypot(v - cv))
+            }
+        }
+    }
 }
 
 /// MediaPipe's One-Euro filter as its `LandmarksSmoothingCalculator` applies it (not the
@@ -659,6 +733,8 @@ pub struct Pipeline {
     aux_filters: [MpOneEuro; 4],
     /// Where the operator was last seen.
     operator: Option<OperatorMemory>,
+    /// The operator's station in this frame's image, when the workspace gives one.
+    station: Option<StationView>,
     /// Time of the previous frame [s].
     last_t: Option<f64>,
     /// Time of the current frame [s].
@@ -721,6 +797,7 @@ impl Pipeline {
             config,
             pose_rect: None,
             operator: None,
+            station: None,
             face_rect: None,
             last_face: None,
             hands: [HandTrack::default(), HandTrack::default()],
@@ -782,9 +859,20 @@ impl Pipeline {
         self.process_at(t, image, depth)
     }
 
+    /// Sets the operator's station for the frames that follow (made per frame, as the
+    /// intrinsics can change with the frame size); `None`: no station is known.
+    pub fn set_station(&mut self, station: Option<StationView>) {
+        self.station = station;
+    }
+
+    /// The operator's station in use.
+    pub fn station(&self) -> Option<&StationView> {
+        self.station.as_ref()
+    }
+
     /// Finds the operator's landmarks on the frame taken at camera time `t` [s] (used to
-    /// smooth the tracked pose ROI; must increase). `depth`, aligned to `image`, is used to
-    /// choose the nearest person. An empty or malformed image gives empty landmarks and resets
+    /// smooth the tracked pose ROI; must increase). `depth`, aligned to `image`, and the
+    /// station ([`Pipeline::set_station`]) are used to choose the operator. An empty or malformed image gives empty landmarks and resets
     /// tracking.
     pub fn process_at(
         &mut self,
@@ -843,7 +931,7 @@ impl Pipeline {
         let recent = self
             .operator
             .filter(|o| self.now - o.t <= OPERATOR_MEMORY_S);
-        let ranked = rank_operators(&dets, size, depth, recent.as_ref());
+        let ranked = rank_operators(&dets, size, depth, recent.as_ref(), self.station.as_ref());
         self.runs.others_refused += (dets.len() - ranked.len()) as u64;
         for &i in ranked.iter().take(MAX_CANDIDATES) {
             let Some(r) = rect_from_alignment(&dets[i], size, 0, 1, 90.0) else {
@@ -959,7 +1047,9 @@ impl Pipeline {
                     let chosen = match pose {
                         // The face nearest the operator's nose.
                         Some(p) => nearest_to(&dets, size, [p.points[0].x, p.points[0].y]),
-                        None => choose_operator(&dets, size, depth),
+                        None => rank_operators(&dets, size, depth, None, self.station.as_ref())
+                            .first()
+                            .and_then(|&i| dets.get(i)),
                     };
                     let Some(d) = chosen else {
                         self.last_face = None;
@@ -1177,7 +1267,7 @@ pub fn choose_operator<'a>(
     size: (u32, u32),
     depth: Option<&DepthImage>,
 ) -> Option<&'a Detection> {
-    rank_operators(dets, size, depth, None)
+    rank_operators(dets, size, depth, None, None)
         .first()
         .and_then(|&i| dets.get(i))
 }
@@ -1188,9 +1278,15 @@ pub fn choose_operator<'a>(
 /// 1. With `recent` (the operator was lost less than [`OPERATOR_MEMORY_S`] ago): only the
 ///    candidates whose box centre is within one body scale of where the operator was, nearest
 ///    first. Anyone else is refused: a person walking by does not take over.
-/// 2. With depth valid inside the box (`depth`, aligned to the image): the nearest person
+/// 2. With `station` (a calibrated workspace with the operator's station): the candidates at
+///    the station first, nearest to it first; then the others by rules 3 and 4. A box with
+///    valid depth is at the station when its centre, lifted to the box's median depth, is
+///    within the station's radius; a box without, when it contains the station's projection
+///    (see [`StationView`]). Someone nearer the camera but away from the station (a person
+///    walking between) is not preferred over the person at it.
+/// 3. With depth valid inside the box (`depth`, aligned to the image): the nearest person
 ///    first (median depth of the box), then those without valid depth.
-/// 3. Otherwise, and among equal depths: by detector score × body size, the square root of
+/// 4. Otherwise, and among equal depths: by detector score × body size, the square root of
 ///    the box area [px]. The score dominates when the boxes are about equally large (as
 ///    mediapipe, which takes the highest-scoring detection), and a clearly larger (nearer)
 ///    body wins over a slightly better score.
@@ -1199,6 +1295,7 @@ pub fn rank_operators(
     size: (u32, u32),
     depth: Option<&DepthImage>,
     recent: Option<&OperatorMemory>,
+    station: Option<&StationView>,
 ) -> Vec<usize> {
     let (w, h) = (f64::from(size.0), f64::from(size.1));
     let centre = |d: &Detection| {
@@ -1211,14 +1308,31 @@ pub fn rank_operators(
         let area_px = f64::from(d.width) * w * f64::from(d.height) * h;
         f64::from(d.score) * area_px.max(0.0).sqrt()
     };
-    let mut order: Vec<(usize, f64, f64)> = dets
+    struct Candidate {
+        i: usize,
+        /// At the station: 0 judged with depth, 1 without, 2 not at it (or no station); and
+        /// the distance to it ([m] with depth, [px] without, see [`StationView`]).
+        station: (u8, f64),
+        /// Median box depth [m]; +∞ without valid depth.
+        z: f64,
+        /// Detector score × √(box area [px²]).
+        key: f64,
+    }
+    let mut order: Vec<Candidate> = dets
         .iter()
         .enumerate()
         .map(|(i, d)| {
-            let z = depth
-                .and_then(|depth| box_median_depth(d, size, depth))
-                .unwrap_or(f64::INFINITY);
-            (i, z, key(d))
+            let z = depth.and_then(|depth| box_median_depth(d, size, depth));
+            let station = match station.map(|s| s.place(d, size, z)) {
+                Some((true, dist)) => (if z.is_some() { 0 } else { 1 }, dist),
+                _ => (2, 0.0),
+            };
+            Candidate {
+                i,
+                station,
+                z: z.unwrap_or(f64::INFINITY),
+                key: key(d),
+            }
         })
         .collect();
     if let Some(o) = recent {
@@ -1226,12 +1340,17 @@ pub fn rank_operators(
             let c = centre(&dets[i]);
             (c[0] - o.centre[0]).hypot(c[1] - o.centre[1])
         };
-        order.retain(|&(i, _, _)| dist(i) <= o.scale.max(1.0));
-        order.sort_by(|a, b| dist(a.0).total_cmp(&dist(b.0)));
-        return order.into_iter().map(|(i, _, _)| i).collect();
+        order.retain(|c| dist(c.i) <= o.scale.max(1.0));
+        order.sort_by(|a, b| dist(a.i).total_cmp(&dist(b.i)));
+        return order.into_iter().map(|c| c.i).collect();
     }
-    order.sort_by(|a, b| a.1.total_cmp(&b.1).then(b.2.total_cmp(&a.2)));
-    order.into_iter().map(|(i, _, _)| i).collect()
+    order.sort_by(|a, b| {
+        (a.station.0.cmp(&b.station.0))
+            .then(a.station.1.total_cmp(&b.station.1))
+            .then(a.z.total_cmp(&b.z))
+            .then(b.key.total_cmp(&a.key))
+    });
+    order.into_iter().map(|c| c.i).collect()
 }
 
 /// Median valid depth [m] on a grid of up to 15 × 15 samples inside a detection box.
@@ -1286,12 +1405,12 @@ mod tests {
             det(0.6, 300.0, 10.0, 72.0, 76.0),
             det(0.9, 10.0, 10.0, 5471.0 / 76.0, 76.0),
         ];
-        assert_eq!(rank_operators(&dets, SIZE, None, None), [1, 0]);
+        assert_eq!(rank_operators(&dets, SIZE, None, None, None), [1, 0]);
         let riders = [
             det(0.55, 0.0, 0.0, 2639.0 / 50.0, 50.0),
             det(0.90, 300.0, 0.0, 52.76, 50.0),
         ];
-        assert_eq!(rank_operators(&riders, SIZE, None, None), [1, 0]);
+        assert_eq!(rank_operators(&riders, SIZE, None, None, None), [1, 0]);
         assert!(std::ptr::eq(
             choose_operator(&riders, SIZE, None).unwrap(),
             &riders[1]
@@ -1306,7 +1425,7 @@ mod tests {
             det(0.9, 0.0, 0.0, 100.0, 150.0),
             det(0.8, 300.0, 0.0, 200.0, 300.0),
         ];
-        assert_eq!(rank_operators(&dets, SIZE, None, None), [1, 0]);
+        assert_eq!(rank_operators(&dets, SIZE, None, None, None), [1, 0]);
     }
 
     /// With depth, the nearest person first, whatever the scores; a box without valid depth
@@ -1333,7 +1452,120 @@ mod tests {
             det(0.60, 220.0, 10.0, 150.0, 200.0), // 0.9 m
             det(0.99, 450.0, 10.0, 150.0, 200.0), // no depth
         ];
-        assert_eq!(rank_operators(&dets, SIZE, Some(&depth), None), [1, 0, 2]);
+        assert_eq!(
+            rank_operators(&dets, SIZE, Some(&depth), None, None),
+            [1, 0, 2]
+        );
+    }
+
+    const INTRINSICS: Intrinsics = Intrinsics {
+        width: 640,
+        height: 480,
+        fx: 500.0,
+        fy: 500.0,
+        cx: 320.0,
+        cy: 240.0,
+    };
+
+    /// Rule 2 without depth, worked by hand: the station at (−0.47, −0.26, 2.0) m projects to
+    /// (320 + 500·(−0.47)/2, 240 + 500·(−0.26)/2) = (202.5, 175) px, inside the second box
+    /// (150..250, 100..300) only. That person ranks first although the first one has the better
+    /// score × size (0.9·√(200·300) = 220 > 0.5·√(100·200) = 71); the third (0.8·√(100·150)
+    /// = 98), not at the station either, follows by score × size.
+    #[test]
+    fn without_depth_the_box_holding_the_station_comes_first() {
+        let station = StationView::new(Point3::new(-0.47, -0.26, 2.0), 0.6, INTRINSICS).unwrap();
+        assert!((station.centre_px[0] - 202.5).abs() < 1e-9);
+        assert!((station.centre_px[1] - 175.0).abs() < 1e-9);
+        let dets = [
+            det(0.9, 400.0, 100.0, 200.0, 300.0),
+            det(0.5, 150.0, 100.0, 100.0, 200.0),
+            det(0.8, 0.0, 300.0, 100.0, 150.0),
+        ];
+        assert_eq!(rank_operators(&dets, SIZE, None, None, None), [0, 2, 1]);
+        assert_eq!(
+            rank_operators(&dets, SIZE, None, None, Some(&station)),
+            [1, 0, 2]
+        );
+        // Behind the camera, or at the camera, a station tells no one apart.
+        assert_eq!(
+            StationView::new(Point3::new(0.0, 0.0, -1.0), 0.6, INTRINSICS),
+            None
+        );
+        assert_eq!(
+            StationView::new(Point3::new(0.0, 0.0, 0.0), 0.6, INTRINSICS),
+            None
+        );
+    }
+
+    /// The workspace's station seen by the camera, worked by hand: the camera sits at
+    /// (1, 0, 0) m in the workspace, axes aligned; the station at (1, 0.5, 2) m is (0, 0.5, 2) m
+    /// in the camera frame and projects to (320 + 500·0/2, 240 + 500·0.5/2) = (320, 365) px.
+    #[test]
+    fn a_workspace_station_is_seen_through_the_extrinsics() {
+        let extrinsics = Extrinsics {
+            world_from_camera: nalgebra::Isometry3::translation(1.0, 0.0, 0.0),
+        };
+        let st = crate::Station::new(crate::Vec3::new(1.0, 0.5, 2.0), 0.4).unwrap();
+        let view = StationView::from_workspace(&st, &extrinsics, INTRINSICS).unwrap();
+        assert!((view.camera_m - Point3::new(0.0, 0.5, 2.0)).norm() < 1e-12);
+        assert!((view.centre_px[0] - 320.0).abs() < 1e-9);
+        assert!((view.centre_px[1] - 365.0).abs() < 1e-9);
+        assert_eq!(view.radius_m, 0.4);
+        // Behind the camera: none.
+        let behind = crate::Station::new(crate::Vec3::new(1.0, 0.0, -2.0), 0.4).unwrap();
+        assert_eq!(
+            StationView::from_workspace(&behind, &extrinsics, INTRINSICS),
+            None
+        );
+    }
+
+    /// Rule 2 with depth, worked by hand (fx = fy = 500, principal point (320, 240)): the box
+    /// at 1.5 m, centre (85, 110) px, lifts to ((85 − 320)/500·1.5, (110 − 240)/500·1.5, 1.5) =
+    /// (−0.705, −0.39, 1.5) m, 0.011 m from the station (−0.7, −0.4, 1.5) m: at it. The box at
+    /// 0.9 m, centre (295, 110) px, lifts to (−0.045, −0.234, 0.9) m, √(0.655² + 0.166² + 0.6²)
+    /// = 0.90 m away, beyond the 0.6 m radius. The person at the station ranks first although
+    /// the other is nearer the camera (rule 3 alone gives the opposite order).
+    #[test]
+    fn with_depth_the_person_at_the_station_beats_a_nearer_one() {
+        let mut data = vec![0u16; 640 * 480];
+        for (i, d) in data.iter_mut().enumerate() {
+            *d = match i % 640 {
+                0..200 => 1500,
+                200..400 => 900,
+                _ => 0,
+            };
+        }
+        let depth = DepthImage {
+            width: 640,
+            height: 480,
+            data,
+            scale_m: 0.001,
+        };
+        let dets = [
+            det(0.99, 10.0, 10.0, 150.0, 200.0),  // 1.5 m, at the station
+            det(0.60, 220.0, 10.0, 150.0, 200.0), // 0.9 m, 0.90 m from it
+            det(0.99, 450.0, 10.0, 150.0, 200.0), // no depth, station not in its box
+        ];
+        let station = StationView::new(Point3::new(-0.7, -0.4, 1.5), 0.6, INTRINSICS).unwrap();
+        let near = station.place(&dets[0], SIZE, Some(1.5));
+        assert!(near.0 && (near.1 - 0.0112).abs() < 1e-3, "{near:?}");
+        let far = station.place(&dets[1], SIZE, Some(0.9));
+        assert!(!far.0 && (far.1 - 0.9036).abs() < 1e-3, "{far:?}");
+        assert_eq!(
+            rank_operators(&dets, SIZE, Some(&depth), None, None),
+            [1, 0, 2]
+        );
+        assert_eq!(
+            rank_operators(&dets, SIZE, Some(&depth), None, Some(&station)),
+            [0, 1, 2]
+        );
+        // A station no one is at leaves the order to rules 3 and 4.
+        let empty = StationView::new(Point3::new(2.0, 2.0, 3.0), 0.3, INTRINSICS).unwrap();
+        assert_eq!(
+            rank_operators(&dets, SIZE, Some(&depth), None, Some(&empty)),
+            [1, 0, 2]
+        );
     }
 
     /// Within OPERATOR_MEMORY_S of losing the operator, only a candidate where they were (box
@@ -1349,12 +1581,12 @@ mod tests {
         let passer = det(0.99, 300.0, 0.0, 300.0, 400.0); // centre (450, 200): 350 px away
         let operator = det(0.60, 40.0, 120.0, 100.0, 150.0); // centre (90, 195): 11 px away
         let dets = [passer.clone(), operator];
-        assert_eq!(rank_operators(&dets, SIZE, None, Some(&was)), [1]);
+        assert_eq!(rank_operators(&dets, SIZE, None, Some(&was), None), [1]);
         assert_eq!(
-            rank_operators(&[passer], SIZE, None, Some(&was)),
+            rank_operators(&[passer], SIZE, None, Some(&was), None),
             Vec::<usize>::new()
         );
         // Without the memory the passer ranks first.
-        assert_eq!(rank_operators(&dets, SIZE, None, None), [0, 1]);
+        assert_eq!(rank_operators(&dets, SIZE, None, None, None), [0, 1]);
     }
 }
