@@ -8,8 +8,9 @@
 //!   input, and their landmarks are projected back to the image;
 //! - in [`Mode::Tracking`] the next frame's ROIs come from this frame's landmarks, so the
 //!   detectors run only when a landmark model reports its target lost. Hand ROIs come from the
-//!   previous hand landmarks, else from the pose's wrist, index and pinky points, and only
-//!   then from palm detection. Models can run at staggered rates (`face_every`,
+//!   previous hand landmarks; a hand not tracked comes from palm detection (as in mediapipe's
+//!   Hands; every `palm_every`-th frame while one is missing), else from the pose's wrist,
+//!   index and pinky points. Models can run at staggered rates (`face_every`,
 //!   `hand_every`): a skipped model keeps its last landmarks.
 //! - in [`Mode::Static`] every frame is independent (MediaPipe's `static_image_mode`): this is
 //!   what the photo tests compare against the official mediapipe 0.10.21 output.
@@ -76,8 +77,8 @@ pub struct PipelineConfig {
     /// Run each hand's landmark model on every n-th frame while tracking, the two hands on
     /// alternating frames when 2 (1 = every frame).
     pub hand_every: u32,
-    /// While a hand is lost and the pose gives no usable wrist, run palm detection on every
-    /// n-th frame.
+    /// While a hand is not tracked, run palm detection on every n-th frame (between them, and
+    /// where it finds no palm, the hand's ROI comes from the pose's wrist).
     pub palm_every: u32,
 }
 
@@ -1098,9 +1099,12 @@ impl Pipeline {
     ) -> Result<Vec<HandLandmarks>> {
         let size = (image.width, image.height);
         let tracking = self.config.mode == Mode::Tracking;
-        // Candidate ROIs per slot (0: the person's left hand, 1: right): tracked, else from
-        // the pose.
-        let mut rects: [Option<NormRect>; 2] = [self.hands[0].rect, self.hands[1].rect];
+        // Candidate ROIs per slot (0: the person's left hand, 1: right): tracked; for a hand
+        // not tracked, palm detection (as mediapipe's Hands, which detects palms while fewer
+        // hands than wanted are tracked; here on every `palm_every`-th frame), else the
+        // pose's wrist.
+        let rects: [Option<NormRect>; 2] = [self.hands[0].rect, self.hands[1].rect];
+        let mut from_pose: [Option<NormRect>; 2] = [None, None];
         if tracking && let Some(p) = pose {
             for (slot, (wrist, index, pinky)) in
                 [(15, 19, 17), (16, 20, 18)].into_iter().enumerate()
@@ -1112,7 +1116,7 @@ impl Pipeline {
                             (p.points[i].y / f64::from(size.1)) as f32,
                         ]
                     };
-                    rects[slot] = hand_rect_from_pose(n(wrist), n(index), n(pinky), size);
+                    from_pose[slot] = hand_rect_from_pose(n(wrist), n(index), n(pinky), size);
                 }
             }
         }
@@ -1121,6 +1125,10 @@ impl Pipeline {
             || self
                 .frame
                 .is_multiple_of(u64::from(self.config.palm_every.max(1)));
+        let near = |a: &NormRect, b: &NormRect| {
+            ((a.cx - b.cx) * size.0 as f32).hypot((a.cy - b.cy) * size.1 as f32)
+                < 0.5 * a.width.max(b.width) * size.0 as f32
+        };
         let mut from_palms: Vec<NormRect> = Vec::new();
         if missing > 0 && palm_due {
             let t = Instant::now();
@@ -1131,19 +1139,21 @@ impl Pipeline {
                 if let Some(r) = rect_from_box(d, size, 0, 2, 90.0) {
                     let r = r.transformed(&PALM_ROI, size);
                     // Skip palms already covered by a tracked hand.
-                    let covered = rects.iter().flatten().any(|t| {
-                        ((t.cx - r.cx) * size.0 as f32).hypot((t.cy - r.cy) * size.1 as f32)
-                            < 0.5 * t.width.max(r.width) * size.0 as f32
-                    });
-                    if !covered {
+                    if !rects.iter().flatten().any(|t| near(t, &r)) {
                         from_palms.push(r);
                     }
                 }
             }
         }
+        // A pose ROI where a palm was detected gives way to the palm's.
+        for r in &mut from_pose {
+            if r.is_some_and(|r| from_palms.iter().any(|p| near(p, &r))) {
+                *r = None;
+            }
+        }
         let mut found: Vec<HandLandmarks> = Vec::new();
         let t = Instant::now();
-        // Tracked/pose slots first, then palm candidates.
+        // Tracked slots first, then palm candidates, then the pose's.
         let mut jobs: Vec<(Option<usize>, NormRect)> = Vec::new();
         for (slot, r) in rects.iter().enumerate() {
             if let Some(r) = r {
@@ -1152,6 +1162,11 @@ impl Pipeline {
         }
         for r in from_palms {
             jobs.push((None, r));
+        }
+        for (slot, r) in from_pose.iter().enumerate() {
+            if let Some(r) = r {
+                jobs.push((Some(slot), *r));
+            }
         }
         let mut next: [HandTrack; 2] = [HandTrack::default(), HandTrack::default()];
         for (slot, rect) in jobs {
