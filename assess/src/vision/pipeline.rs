@@ -24,10 +24,10 @@
 use std::path::Path;
 use std::time::Instant;
 
-use super::anchors::{self, Anchor, AnchorOptions};
-use super::detect::{self, DecodeOptions, Detection};
 use nalgebra::Point3;
 
+use super::anchors::{self, Anchor, AnchorOptions};
+use super::detect::{self, DecodeOptions, Detection};
 use super::frame::{DepthImage, Extrinsics, Intrinsics, RgbImage};
 use super::landmarks::{FaceLandmarks, HandLandmarks, Landmark, Landmarks, PoseLandmarks};
 use super::models::Model;
@@ -873,8 +873,8 @@ impl Pipeline {
 
     /// Finds the operator's landmarks on the frame taken at camera time `t` [s] (used to
     /// smooth the tracked pose ROI; must increase). `depth`, aligned to `image`, and the
-    /// station ([`Pipeline::set_station`]) are used to choose the operator. An empty or malformed image gives empty landmarks and resets
-    /// tracking.
+    /// station ([`Pipeline::set_station`]) are used to choose the operator. An empty or
+    /// malformed image gives empty landmarks and resets tracking.
     pub fn process_at(
         &mut self,
         t: f64,
