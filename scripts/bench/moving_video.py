@@ -37,20 +37,16 @@ def px(landmarks, w, h):
 def run_mediapipe(frames_dir, out, fixture):
     import mediapipe as mp
 
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "models"))
+    from reference_tracking import video_mode_solutions
+
     pngs = sorted(pathlib.Path(frames_dir).glob("*.png"))
     if not pngs:
         sys.exit(f"mediapipe: no .png frames in {frames_dir}")
     t0 = time.perf_counter()
     frames = [cv2.cvtColor(cv2.imread(str(p)), cv2.COLOR_BGR2RGB) for p in pngs]
     decode_s = time.perf_counter() - t0
-    pose = mp.solutions.pose.Pose(static_image_mode=False, model_complexity=1,
-                                  smooth_landmarks=False, min_detection_confidence=0.5,
-                                  min_tracking_confidence=0.5)
-    face = mp.solutions.face_mesh.FaceMesh(static_image_mode=False, max_num_faces=1,
-                                           refine_landmarks=False, min_detection_confidence=0.5,
-                                           min_tracking_confidence=0.5)
-    hands = mp.solutions.hands.Hands(static_image_mode=False, max_num_hands=2, model_complexity=1,
-                                     min_detection_confidence=0.5, min_tracking_confidence=0.5)
+    pose, face, hands = video_mode_solutions()
     result = []
     per_model = {"pose": 0.0, "face": 0.0, "hands": 0.0}
     wall0, cpu0 = time.perf_counter(), time.process_time()

@@ -40,8 +40,10 @@ def px(landmarks, w, h, extra=False):
     return out
 
 
-def main(images, out_path):
-    path = f"{images}/pose_sitting.jpg"
+def video_mode_solutions():
+    """mediapipe's Pose (complexity 1, landmark smoothing off), FaceMesh (no refinement) and
+    Hands (complexity 1, 2 hands) in video mode: the configuration of every video-mode
+    reference (also scripts/bench/moving_video.py)."""
     pose = mp.solutions.pose.Pose(static_image_mode=False, model_complexity=1,
                                   smooth_landmarks=False, min_detection_confidence=0.5,
                                   min_tracking_confidence=0.5)
@@ -50,6 +52,12 @@ def main(images, out_path):
                                            min_tracking_confidence=0.5)
     hands = mp.solutions.hands.Hands(static_image_mode=False, max_num_hands=2, model_complexity=1,
                                      min_detection_confidence=0.5, min_tracking_confidence=0.5)
+    return pose, face, hands
+
+
+def main(images, out_path):
+    path = f"{images}/pose_sitting.jpg"
+    pose, face, hands = video_mode_solutions()
     result = []
     for k, f in enumerate(frames(path)):
         h, w = f.shape[:2]

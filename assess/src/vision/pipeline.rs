@@ -1443,14 +1443,12 @@ mod tests {
         assert_eq!(rank_operators(&dets, SIZE, None, None, None), [1, 0]);
     }
 
-    /// With depth, the nearest person first, whatever the scores; a box without valid depth
-    /// comes after those with it.
-    #[test]
-    fn with_depth_the_nearest_comes_first() {
+    /// Depth in three bands (columns 0–199 at 1.5 m, 200–399 at 0.9 m, none beyond) and a
+    /// person in each: at 1.5 m (score 0.99), at 0.9 m (0.60), without depth (0.99).
+    fn three_depth_bands() -> (DepthImage, [Detection; 3]) {
         let mut data = vec![0u16; 640 * 480];
         for (i, d) in data.iter_mut().enumerate() {
-            let x = i % 640;
-            *d = match x {
+            *d = match i % 640 {
                 0..200 => 1500,
                 200..400 => 900,
                 _ => 0, // no depth
@@ -1467,6 +1465,14 @@ mod tests {
             det(0.60, 220.0, 10.0, 150.0, 200.0), // 0.9 m
             det(0.99, 450.0, 10.0, 150.0, 200.0), // no depth
         ];
+        (depth, dets)
+    }
+
+    /// With depth, the nearest person first, whatever the scores; a box without valid depth
+    /// comes after those with it.
+    #[test]
+    fn with_depth_the_nearest_comes_first() {
+        let (depth, dets) = three_depth_bands();
         assert_eq!(
             rank_operators(&dets, SIZE, Some(&depth), None, None),
             [1, 0, 2]
@@ -1543,25 +1549,9 @@ mod tests {
     /// the other is nearer the camera (rule 3 alone gives the opposite order).
     #[test]
     fn with_depth_the_person_at_the_station_beats_a_nearer_one() {
-        let mut data = vec![0u16; 640 * 480];
-        for (i, d) in data.iter_mut().enumerate() {
-            *d = match i % 640 {
-                0..200 => 1500,
-                200..400 => 900,
-                _ => 0,
-            };
-        }
-        let depth = DepthImage {
-            width: 640,
-            height: 480,
-            data,
-            scale_m: 0.001,
-        };
-        let dets = [
-            det(0.99, 10.0, 10.0, 150.0, 200.0),  // 1.5 m, at the station
-            det(0.60, 220.0, 10.0, 150.0, 200.0), // 0.9 m, 0.90 m from it
-            det(0.99, 450.0, 10.0, 150.0, 200.0), // no depth, station not in its box
-        ];
+        // The person at 1.5 m is at the station; the one at 0.9 m is 0.90 m from it; the
+        // station is not in the box of the one without depth.
+        let (depth, dets) = three_depth_bands();
         let station = StationView::new(Point3::new(-0.7, -0.4, 1.5), 0.6, INTRINSICS).unwrap();
         let near = station.place(&dets[0], SIZE, Some(1.5));
         assert!(near.0 && (near.1 - 0.0112).abs() < 1e-3, "{near:?}");
