@@ -11,7 +11,7 @@
 //! - `cues.csv`, the cues assessed, for every input (the `assess::io::cue_csv` format at full
 //!   precision: `assess --cues <out>/cues.csv` with the same workspace and config reproduces
 //!   `indicators.csv` byte for byte; a KTH folder's derived cues, a video's extracted ones);
-//! - for camera inputs: `landmarks.csv` (`crate::vision_cmd::LandmarkCsv`).
+//! - for camera inputs: `landmarks.csv` (`assess::vision::output::LandmarkCsv`).
 //!   **Privacy**: these hold landmarks and cues only; the camera image is written only to the
 //!   `--annotate` path, and only when it is given.
 //!
@@ -353,7 +353,8 @@ fn assess_camera(
     cfg: AssessConfig,
 ) -> crate::Result<Report> {
     use crate::vision_cmd::{
-        ImageSink, LandmarkCsv, Perception, annotate, load_extrinsics, open_source, pipeline_config,
+        LandmarkCsv, Perception, annotate, image_sink, intrinsics_override, load_extrinsics,
+        open_source, pipeline_config,
     };
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
@@ -374,7 +375,7 @@ fn assess_camera(
     let mut perception = Perception::load(
         pipeline_config(&v.camera, v.still),
         extrinsics,
-        opened.intrinsics_override(v.camera.intrinsics)?,
+        intrinsics_override(&opened, v.camera.intrinsics)?,
         workspace.station(),
     )?;
     let overlay_ws = workspace.clone();
@@ -389,7 +390,7 @@ fn assess_camera(
             Err(_) => (a.clone(), a.clone()),
         });
     let mut sink = match &annotate_path {
-        Some((write_to, _)) => Some(ImageSink::create(write_to, "--annotate", opened.fps)?),
+        Some((write_to, _)) => Some(image_sink(write_to, "--annotate", opened.fps)?),
         None => None,
     };
 
@@ -1083,9 +1084,9 @@ mod tests {
 #[cfg(all(test, feature = "vision"))]
 mod vision_tests {
     use super::*;
-    use crate::vision_cmd::{ImageSink, LANDMARK_HEADER};
     use assess::vision::FrameSource as _;
     use assess::vision::RgbImage;
+    use assess::vision::output::{ImageSink, LANDMARK_HEADER};
     use assess::vision::source::capture::{VideoFileOptions, VideoFileSource};
 
     const PHOTO: &str = "data/images/pose_sitting.jpg";
@@ -1290,7 +1291,7 @@ mod vision_tests {
         // A 5-frame video of the photo, written with the same MJPG writer as --annotate.
         let avi = s.dir.path().join("clip.avi");
         let photo = RgbImage::read(&root().join(PHOTO)).unwrap();
-        let mut sink = ImageSink::create(&avi, "test", 30.0).unwrap();
+        let mut sink = ImageSink::create(&avi, 30.0).unwrap();
         for _ in 0..5 {
             sink.push(&photo).unwrap();
         }

@@ -29,7 +29,8 @@ use clap::Args;
 use crate::Error;
 use crate::error::ResultExt as _;
 use crate::vision_cmd::{
-    CameraArgs, CueInput, FixedIntrinsics, IntrinsicsArg, open_source, parse_hfov, parse_intrinsics,
+    CameraArgs, CueInput, FixedIntrinsics, IntrinsicsArg, intrinsics_override, open_source,
+    parse_hfov, parse_intrinsics,
 };
 
 /// Arguments of `hrc-adapt calibrate`.
@@ -171,7 +172,7 @@ fn calibrate(args: &CalibrateArgs, board: &BoardSpec) -> crate::Result<Outcome> 
             let image = folder::read_image(path)?;
             let k = args
                 .intrinsics
-                .map(|k| k.at_size(image.width, image.height));
+                .map(|k| k.pinhole().at_size(image.width, image.height));
             let guessed = k.is_none();
             let k = k
                 .unwrap_or_else(|| Intrinsics::from_hfov(image.width, image.height, args.hfov_deg));
@@ -285,9 +286,7 @@ fn grab_frames(args: &CalibrateArgs, spec: &Path) -> crate::Result<Frames> {
         ..CameraArgs::default()
     };
     let opened = open_source(&input, &cam, None)?;
-    let mut explicit = opened
-        .intrinsics_override(args.intrinsics)?
-        .map(FixedIntrinsics::new);
+    let mut explicit = intrinsics_override(&opened, args.intrinsics)?.map(FixedIntrinsics::new);
     let mut src = opened.source;
     let mut frames = Vec::new();
     let mut seen = 0u32;

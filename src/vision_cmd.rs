@@ -1,9 +1,9 @@
 //! Binary-side camera plumbing shared by `hrc-adapt assess --cues <video | images | .bag |
 //! camera | webcam:N>`, `hrc-adapt trial --cues camera` and `hrc-adapt calibrate --camera`: what
-//! a `--cues` / `--camera` argument names, the camera options, and (feature `vision`) opening the
-//! frame source, the perception stack
-//! (landmarks → cues), the privacy-preserving outputs (`landmarks.csv`) and the opt-in image
-//! outputs (annotated monitoring view, stored video).
+//! a `--cues` / `--camera` argument names, the camera options, and (feature `vision`) turning
+//! them into `assess::vision`'s frame source, intrinsics and pipeline settings. The perception
+//! stack (landmarks → cues), the privacy-preserving output (`landmarks.csv`) and the opt-in
+//! image outputs (annotated monitoring view, stored video) are `assess::vision`'s.
 //!
 //! **Privacy.** By default nothing derived from the camera image except landmarks and cues is
 //! written. Images are written only where the user asked for them by a flag
@@ -261,70 +261,29 @@ pub(crate) fn vision_missing(input: &CueInput) -> Error {
 #[cfg(feature = "vision")]
 pub(crate) use camera::*;
 
+/// The binary's side of `assess::vision`: a `--cues` / `--camera` argument and the camera
+/// options turned into the library's source, intrinsics and pipeline settings, with errors that
+/// name the flags. The perception itself (`Perception`, the landmark CSV, the image sinks, the
+/// overlay) is `assess::vision`'s.
 #[cfg(feature = "vision")]
 mod camera {
-    use std::fmt::Write as _;
-    use std::fs::File;
-    use std::io::{BufWriter, Write};
-    use std::path::{Path, PathBuf};
+    use std::path::Path;
 
     use crate::Error;
     use crate::error::ResultExt as _;
-    use assess::vision::cues::{CueConfig, CueExtractor, PerceivedCues, load_canonical_face};
-    use assess::vision::pipeline::{Mode, Pipeline, PipelineConfig, StationView, Variant};
-    use assess::vision::source::capture::{
-        VideoFileOptions, VideoFileSource, VideoSink, WebcamOptions, WebcamSource,
-    };
-    use assess::vision::source::folder::{ImageFolderOptions, ImageFolderSource};
-    use assess::vision::{
-        CameraFrame, Extrinsics, FrameSource, Intrinsics, Landmarks, RgbImage, draw, models,
-    };
-    use assess::{Assessment, Station, Workspace};
+    use assess::vision::Extrinsics;
+    use assess::vision::pipeline::{Mode, PipelineConfig, Variant};
+    use assess::vision::source::{self, OpenedSource, SourceSpec};
+
+    pub(crate) use assess::vision::output::{ImageSink, LandmarkCsv};
+    pub(crate) use assess::vision::{FixedIntrinsics, Perception, Pinhole, annotate};
 
     use super::{CameraArgs, CueInput, IntrinsicsArg};
 
-    /// `--intrinsics` applied to the frames of one source: they hold for one camera, so the
-    /// first frame fixes the size and a frame of another size is an error.
-    #[derive(Debug, Clone, Copy)]
-    pub(crate) struct FixedIntrinsics {
-        arg: IntrinsicsArg,
-        /// The first frame's size (width, height) [px].
-        size: Option<(u32, u32)>,
-    }
-
-    impl FixedIntrinsics {
-        /// Nothing seen yet.
-        pub(crate) fn new(arg: IntrinsicsArg) -> Self {
-            Self { arg, size: None }
-        }
-
-        /// The intrinsics of frame `index`, an image of `width` × `height` [px].
-        pub(crate) fn at(
-            &mut self,
-            index: u64,
-            width: u32,
-            height: u32,
-        ) -> crate::Result<Intrinsics> {
-            match *self.size.get_or_insert((width, height)) {
-                (w, h) if (w, h) == (width, height) => Ok(self.arg.at_size(width, height)),
-                (w, h) => Err(Error::usage(
-                    "--intrinsics",
-                    format!(
-                        "frame {index} is {width} x {height} px but the first frame was {w} x {h} \
-                         px: --intrinsics hold for one camera (without it, each image of a \
-                         folder gets intrinsics from --hfov for its own size)"
-                    ),
-                )),
-            }
-        }
-    }
-
     impl IntrinsicsArg {
-        /// As [`Intrinsics`] of a `width` × `height` image [px].
-        pub(crate) fn at_size(self, width: u32, height: u32) -> Intrinsics {
-            Intrinsics {
-                width,
-                height,
+        /// As the library's [`Pinhole`].
+        pub(crate) fn pinhole(self) -> Pinhole {
+            Pinhole {
                 fx: self.fx,
                 fy: self.fy,
                 cx: self.cx,
@@ -333,195 +292,69 @@ mod camera {
         }
     }
 
-    /// An opened frame source, its nominal frame rate and, when known, how many frames it
-    /// holds.
-    pub(crate) struct Opened {
-        /// The source.
-        pub(crate) source: Box<dyn FrameSource>,
-        /// The number of frames, for recordings that know it.
-        pub(crate) len: Option<u64>,
-        /// The source's nominal frame rate [1/s] (the container's, the folder's, the
-        /// driver's); the rate of a video written from its frames.
-        pub(crate) fps: f64,
-        /// Whether the source carries its own calibrated intrinsics (RealSense cameras and
-        /// `.bag` files), which `--intrinsics` must not override.
-        pub(crate) own_intrinsics: bool,
-    }
-
-    impl Opened {
-        /// `--intrinsics` for this source: refused where the source carries its own.
-        pub(crate) fn intrinsics_override(
-            &self,
-            arg: Option<IntrinsicsArg>,
-        ) -> crate::Result<Option<IntrinsicsArg>> {
-            if arg.is_some() && self.own_intrinsics {
-                return Err(Error::usage(
-                    "--intrinsics",
-                    format!(
-                        "--intrinsics: {} carries its own calibrated intrinsics; drop the flag",
-                        self.source.describe()
-                    ),
-                ));
-            }
-            Ok(arg)
-        }
-    }
-
-    impl std::fmt::Debug for Opened {
-        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-            f.debug_struct("Opened")
-                .field("source", &self.source.describe())
-                .field("len", &self.len)
-                .field("fps", &self.fps)
-                .field("own_intrinsics", &self.own_intrinsics)
-                .finish()
-        }
-    }
-
-    /// Opens the frame source `input` names. `depth` is an aligned 16-bit PNG folder for a
-    /// video file or an image folder.
+    /// Opens the frame source `input` names. `depth` (`--depth`) is an aligned 16-bit PNG
+    /// folder for a video file or an image folder.
     pub(crate) fn open_source(
         input: &CueInput,
         cam: &CameraArgs,
         depth: Option<&Path>,
-    ) -> crate::Result<Opened> {
-        // Intrinsics given on the command line are not passed to the sources: the frame size
-        // is not known here, so they are applied per frame by the caller ([`FixedIntrinsics`],
-        // which refuses a size change); the sources give their own (a RealSense's, a depth.toml's,
-        // else from the hfov for each frame's size).
-        if depth.is_some() && !matches!(input, CueInput::Video(_) | CueInput::Images(_)) {
-            return Err(Error::usage(
-                "--depth",
-                "--depth applies to a video file or an image folder only",
-            ));
-        }
-        let opened = match input {
+    ) -> crate::Result<OpenedSource> {
+        let depth = depth.map(Path::to_path_buf);
+        let spec = match input {
+            CueInput::Video(path) => SourceSpec::Video {
+                path: path.clone(),
+                depth,
+            },
+            CueInput::Images(path) => SourceSpec::Images {
+                path: path.clone(),
+                depth,
+            },
+            _ if depth.is_some() => {
+                return Err(Error::usage(
+                    "--depth",
+                    "--depth applies to a video file or an image folder only",
+                ));
+            }
+            CueInput::Bag(path) => SourceSpec::Bag(path.clone()),
+            CueInput::Camera => SourceSpec::Camera,
+            CueInput::Webcam { device, size } => SourceSpec::Webcam {
+                device: *device,
+                size: *size,
+            },
             CueInput::CueCsv(_) | CueInput::Kth(_) => {
                 return Err(Error::Internal {
                     reason: format!("{input:?} is a cue file, not a frame source"),
                 });
             }
-            CueInput::Video(p) => {
-                let source = VideoFileSource::open(
-                    p,
-                    VideoFileOptions {
-                        intrinsics: None,
-                        hfov_deg: cam.hfov,
-                        fps: None,
-                        depth: depth.map(Path::to_path_buf),
-                    },
-                )?;
-                let (len, fps) = (source.frame_count(), source.fps());
-                Opened {
-                    source: Box::new(source),
-                    len,
-                    fps,
-                    own_intrinsics: false,
-                }
-            }
-            CueInput::Images(p) => {
-                let source = ImageFolderSource::open(
-                    p,
-                    ImageFolderOptions {
-                        hfov_deg: cam.hfov,
-                        depth: depth.map(Path::to_path_buf),
-                        ..ImageFolderOptions::default()
-                    },
-                )?;
-                let (len, fps) = (Some(source.files().len() as u64), source.fps());
-                Opened {
-                    source: Box::new(source),
-                    len,
-                    fps,
-                    own_intrinsics: false,
-                }
-            }
-            CueInput::Bag(p) => open_bag(p)?,
-            CueInput::Camera => open_camera(cam)?,
-            CueInput::Webcam { device, size } => open_webcam(*device, *size, cam)?,
         };
-        Ok(opened)
+        // Intrinsics given on the command line are not passed to the source: the frame size
+        // is not known here, so they are applied per frame ([`FixedIntrinsics`], which refuses
+        // a size change); the sources give their own (a RealSense's, a depth.toml's, else from
+        // the hfov for each frame's size).
+        Ok(source::open(&spec, cam.hfov)?)
     }
 
-    fn open_webcam(n: u32, size: Option<(u32, u32)>, cam: &CameraArgs) -> crate::Result<Opened> {
-        let source = WebcamSource::open(
-            n,
-            WebcamOptions {
-                size,
-                hfov_deg: cam.hfov,
-                ..WebcamOptions::default()
-            },
-        )
-        .with_context(|| format!("cannot open webcam {n} (/dev/video{n})"))?;
-        Ok(Opened {
-            fps: source.fps(),
-            source: Box::new(source),
-            len: None,
-            own_intrinsics: false,
-        })
-    }
-
-    #[cfg(feature = "realsense")]
-    fn open_bag(p: &Path) -> crate::Result<Opened> {
-        use assess::vision::source::realsense::RealSenseSource;
-        Ok(Opened {
-            source: Box::new(RealSenseSource::open_bag(p)?),
-            len: None,
-            fps: assess::vision::source::capture::DEFAULT_FPS,
-            own_intrinsics: true,
-        })
-    }
-
-    #[cfg(not(feature = "realsense"))]
-    fn open_bag(p: &Path) -> crate::Result<Opened> {
-        Err(Error::usage(
-            "--cues",
-            format!(
-                "--cues {}: RealSense .bag files need the `realsense` feature; this hrc-adapt \
-                 was built without it (cargo build --release --features realsense, with \
-                 librealsense2 from scripts/setup)",
-                p.display()
-            ),
-        ))
-    }
-
-    /// `camera`: the first RealSense device (feature `realsense`), else webcam 0; an error
-    /// naming both when neither is there.
-    fn open_camera(cam: &CameraArgs) -> crate::Result<Opened> {
-        #[cfg(feature = "realsense")]
-        let realsense_note = {
-            use assess::vision::source::realsense::{
-                RealSenseConfig, RealSenseSource, list_devices,
-            };
-            match list_devices() {
-                Ok(devices) if !devices.is_empty() => {
-                    let config = RealSenseConfig::default();
-                    let source = RealSenseSource::open_camera(&config)?;
-                    return Ok(Opened {
-                        source: Box::new(source),
-                        len: None,
-                        fps: f64::from(config.fps),
-                        own_intrinsics: true,
-                    });
-                }
-                Ok(_) => "no RealSense device is connected".to_string(),
-                Err(e) => format!("RealSense devices cannot be listed ({e})"),
-            }
-        };
-        #[cfg(not(feature = "realsense"))]
-        let realsense_note =
-            "RealSense cameras need the `realsense` feature, which this build lacks".to_string();
-        match open_webcam(0, None, cam) {
-            Ok(opened) => Ok(opened),
-            Err(e) => Err(Error::Camera {
-                camera: "--cues camera".into(),
-                reason: format!(
-                    "found no camera: {realsense_note}, and webcam 0 cannot be opened ({}); \
-                     connect a camera, or pass a recording to --cues",
-                    e.with_causes()
+    /// `--intrinsics` for this source: refused where the source carries its own.
+    pub(crate) fn intrinsics_override(
+        opened: &OpenedSource,
+        arg: Option<IntrinsicsArg>,
+    ) -> crate::Result<Option<Pinhole>> {
+        if arg.is_some() && opened.own_intrinsics {
+            return Err(Error::usage(
+                "--intrinsics",
+                format!(
+                    "--intrinsics: {} carries its own calibrated intrinsics; drop the flag",
+                    opened.source.describe()
                 ),
-            }),
+            ));
         }
+        Ok(arg.map(IntrinsicsArg::pinhole))
+    }
+
+    /// The image sink for `path`, given by the flag `flag` (named in the errors), at the
+    /// source's rate `fps` [1/s].
+    pub(crate) fn image_sink(path: &Path, flag: &str, fps: f64) -> crate::Result<ImageSink> {
+        ImageSink::create(path, fps).with_context(|| flag.to_owned())
     }
 
     /// Loads `--extrinsics`, or returns the identity with a loud warning.
@@ -552,316 +385,6 @@ mod camera {
             mode: if still { Mode::Static } else { Mode::Tracking },
             ..PipelineConfig::default()
         }
-    }
-
-    /// Landmarks → cues for one camera: the landmark pipeline and the cue extractor.
-    #[derive(Debug)]
-    pub(crate) struct Perception {
-        pipeline: Pipeline,
-        extractor: CueExtractor,
-        intrinsics: Option<FixedIntrinsics>,
-        /// The operator's station (workspace frame).
-        station: Option<Station>,
-    }
-
-    /// One frame's perception result.
-    #[derive(Debug)]
-    pub(crate) struct Perceived {
-        /// The landmarks [px].
-        pub(crate) landmarks: Landmarks,
-        /// The cues (workspace frame) and their quality.
-        pub(crate) cues: PerceivedCues,
-        /// The intrinsics used.
-        pub(crate) intrinsics: Intrinsics,
-    }
-
-    impl Perception {
-        /// Initialises ONNX Runtime, loads the models from [`models::model_dir`] and the
-        /// canonical face. `intrinsics` overrides the sources' (video, images, webcams).
-        /// `station` (the workspace's) makes a person there the preferred operator
-        /// ([`assess::vision::pipeline::rank_operators`]).
-        pub(crate) fn load(
-            config: PipelineConfig,
-            extrinsics: Extrinsics,
-            intrinsics: Option<IntrinsicsArg>,
-            station: Option<&Station>,
-        ) -> crate::Result<Self> {
-            models::init_runtime(None).context("cannot load ONNX Runtime")?;
-            let dir = models::model_dir();
-            let pipeline = Pipeline::load(&dir, config).with_context(|| {
-                format!("cannot load the landmark models from {}", dir.display())
-            })?;
-            let canonical = load_canonical_face(&dir.join("canonical_face_model.csv"))?;
-            let extractor = CueExtractor::new(CueConfig::default(), extrinsics, canonical)?;
-            Ok(Self {
-                pipeline,
-                extractor,
-                intrinsics: intrinsics.map(FixedIntrinsics::new),
-                station: station.copied(),
-            })
-        }
-
-        /// Landmarks and cues of one frame (cue time = camera time). With `--intrinsics`, a
-        /// frame whose size differs from the first is an error.
-        pub(crate) fn step(&mut self, frame: &CameraFrame) -> crate::Result<Perceived> {
-            let intrinsics = match &mut self.intrinsics {
-                Some(fixed) => fixed.at(frame.index, frame.color.width, frame.color.height)?,
-                None => frame.intrinsics,
-            };
-            let station = self.station.as_ref().and_then(|st| {
-                StationView::from_workspace(st, self.extractor.extrinsics(), intrinsics)
-            });
-            self.pipeline.set_station(station);
-            let landmarks = self
-                .pipeline
-                .process_at(frame.t, &frame.color, frame.depth.as_ref())
-                .with_context(|| format!("landmarks of frame {}", frame.index))?;
-            let cues =
-                self.extractor
-                    .extract(frame.t, &landmarks, frame.depth.as_ref(), &intrinsics);
-            Ok(Perceived {
-                landmarks,
-                cues,
-                intrinsics,
-            })
-        }
-
-        /// The extrinsics in use.
-        pub(crate) fn extrinsics(&self) -> &Extrinsics {
-            self.extractor.extrinsics()
-        }
-    }
-
-    /// `landmarks.csv`: one row per landmark, `frame,t,set,index,x_px,y_px,score`.
-    ///
-    /// - `frame`: the source's frame number; `t`: camera time [s];
-    /// - `set`: `pose` (33), `face` (468), `hand0` / `hand1` (21 each, in the pipeline's
-    ///   order; which hand is left or right is in the cues);
-    /// - `x_px`, `y_px`: image position [px] (MediaPipe's continuous coordinates: pixel
-    ///   (u, v) spans [u, u + 1));
-    /// - `score` [-]: a pose landmark's visibility; for face and hands, the set's presence
-    ///   score.
-    #[derive(Debug)]
-    pub(crate) struct LandmarkCsv {
-        path: PathBuf,
-        out: BufWriter<File>,
-        line: String,
-    }
-
-    /// The header of `landmarks.csv`.
-    pub(crate) const LANDMARK_HEADER: &str = "frame,t,set,index,x_px,y_px,score";
-
-    impl LandmarkCsv {
-        /// Creates the file and writes the header.
-        pub(crate) fn create(path: &Path) -> crate::Result<Self> {
-            let file = File::create(path).map_err(Error::io("create", path))?;
-            let mut out = BufWriter::new(file);
-            writeln!(out, "{LANDMARK_HEADER}").map_err(Error::io("write", path))?;
-            Ok(Self {
-                path: path.to_path_buf(),
-                out,
-                line: String::with_capacity(64),
-            })
-        }
-
-        /// Appends one frame's landmarks.
-        pub(crate) fn write(&mut self, frame: u64, t: f64, lm: &Landmarks) -> crate::Result<()> {
-            if let Some(pose) = &lm.pose {
-                for (i, p) in pose.points.iter().enumerate() {
-                    self.row(frame, t, "pose", i, p.x, p.y, p.visibility)?;
-                }
-            }
-            if let Some(face) = &lm.face {
-                for (i, p) in face.points.iter().enumerate() {
-                    self.row(frame, t, "face", i, p.x, p.y, face.score)?;
-                }
-            }
-            for (h, hand) in lm.hands.iter().enumerate() {
-                let set = if h == 0 { "hand0" } else { "hand1" };
-                for (i, p) in hand.points.iter().enumerate() {
-                    self.row(frame, t, set, i, p.x, p.y, hand.score)?;
-                }
-            }
-            Ok(())
-        }
-
-        #[allow(clippy::too_many_arguments)]
-        fn row(
-            &mut self,
-            frame: u64,
-            t: f64,
-            set: &str,
-            index: usize,
-            x: f64,
-            y: f64,
-            score: f64,
-        ) -> crate::Result<()> {
-            self.line.clear();
-            let _ = writeln!(
-                self.line,
-                "{frame},{t:.6},{set},{index},{x:.2},{y:.2},{score:.4}"
-            );
-            self.out
-                .write_all(self.line.as_bytes())
-                .map_err(Error::io("write", &self.path))
-        }
-
-        /// Flushes the file.
-        pub(crate) fn finish(mut self) -> crate::Result<()> {
-            self.out.flush().map_err(Error::io("write", &self.path))
-        }
-    }
-
-    /// Where camera images go when the user asked for them: an MJPG `.avi` video
-    /// ([`VideoSink`]) or, for a path without extension, a folder of numbered PNGs
-    /// (`000000.png`, ...). A video needs every frame at one size; a PNG folder does not.
-    #[derive(Debug)]
-    pub(crate) enum ImageSink {
-        /// A PNG folder.
-        Pngs {
-            /// The folder.
-            dir: PathBuf,
-            /// Frames written.
-            n: u64,
-        },
-        /// An MJPG `.avi` file.
-        Avi(VideoSink),
-    }
-
-    impl ImageSink {
-        /// Creates the sink for `path`: `.avi` → video at `fps` [1/s] (the source's nominal
-        /// rate), no extension → PNG folder (created; it must not exist or be empty); other
-        /// extensions are refused. `flag` names the option in the errors.
-        pub(crate) fn create(path: &Path, flag: &str, fps: f64) -> crate::Result<Self> {
-            match path.extension().and_then(|e| e.to_str()) {
-                None => {
-                    if path.exists()
-                        && std::fs::read_dir(path)
-                            .map_err(Error::io("list", path))?
-                            .next()
-                            .is_some()
-                    {
-                        return Err(Error::usage(
-                            flag,
-                            format!(
-                                "{flag} {}: the folder exists and is not empty",
-                                path.display()
-                            ),
-                        ));
-                    }
-                    std::fs::create_dir_all(path).map_err(Error::io("create", path))?;
-                    Ok(Self::Pngs {
-                        dir: path.to_path_buf(),
-                        n: 0,
-                    })
-                }
-                Some(e) if e.eq_ignore_ascii_case("avi") => {
-                    if path.exists() {
-                        return Err(Error::usage(
-                            flag,
-                            format!("{flag} {}: the file exists", path.display()),
-                        ));
-                    }
-                    Ok(Self::Avi(
-                        VideoSink::create(path, fps)
-                            .with_context(|| format!("{flag} {}", path.display()))?,
-                    ))
-                }
-                Some(_) => Err(Error::usage(
-                    flag,
-                    format!(
-                        "{flag} {}: expected an .avi file, or a path without extension for a \
-                         PNG folder",
-                        path.display()
-                    ),
-                )),
-            }
-        }
-
-        /// Appends one image.
-        pub(crate) fn push(&mut self, image: &RgbImage) -> crate::Result<()> {
-            match self {
-                Self::Pngs { dir, n } => {
-                    let p = dir.join(format!("{:06}.png", *n));
-                    assess::vision::calib::write_png(image, &p)
-                        .with_context(|| format!("cannot write {}", p.display()))?;
-                    *n += 1;
-                    Ok(())
-                }
-                Self::Avi(v) => {
-                    if v.size().is_some_and(|s| s != (image.width, image.height)) {
-                        return Err(Error::data(
-                            v.path().display(),
-                            format!(
-                                "a video holds frames of one size, and this one is {} x {} px; \
-                                 for images of several sizes write a PNG folder (a path without \
-                                 extension)",
-                                image.width, image.height
-                            ),
-                        ));
-                    }
-                    Ok(v.write(image)?)
-                }
-            }
-        }
-
-        /// Closes the sink (a video's index is written here).
-        pub(crate) fn finish(self) -> crate::Result<()> {
-            match self {
-                Self::Pngs { .. } => Ok(()),
-                Self::Avi(v) => Ok(v.finish()?),
-            }
-        }
-    }
-
-    /// Draws the monitoring view on a copy of the frame: landmarks, the workspace areas
-    /// projected with the extrinsics (the confirmed area highlighted), the head ray and the
-    /// live indicator values.
-    pub(crate) fn annotate(
-        frame: &CameraFrame,
-        p: &Perceived,
-        extrinsics: &Extrinsics,
-        workspace: &Workspace,
-        a: Option<&Assessment>,
-    ) -> crate::Result<RgbImage> {
-        let mut img = frame.color.clone();
-        let proj = draw::Projector::new(p.intrinsics, extrinsics);
-        draw::areas(&mut img, &proj, workspace, a.and_then(|a| a.confirmed))?;
-        draw::landmarks(&mut img, &p.landmarks)?;
-        if let Some(head) = &p.cues.frame.head {
-            draw::head_ray(&mut img, &proj, &head.position, &head.facing, 0.8)?;
-        }
-        let name = |id: Option<assess::AreaId>| {
-            id.and_then(|i| workspace.areas().get(i.0))
-                .map_or("none", |a| a.name.as_str())
-        };
-        let mut lines = vec![format!(
-            "t {:.3} s  frame {}  cues: {}",
-            frame.t,
-            frame.index,
-            p.cues.quality.name()
-        )];
-        if let Some(a) = a {
-            let w = &a.windowed;
-            lines.push(format!(
-                "F {}  (perceptual {}, action {})",
-                name(a.confirmed),
-                name(a.perceptual.0),
-                name(a.action.0)
-            ));
-            lines.push(format!(
-                "AED {:.2}  TID {:.2}  ICD {:.2}  ASD {:.2}/s  OHD {:.2}",
-                w.aed, w.tid, w.icd, w.asd_ctx, w.ohd
-            ));
-            lines.push(format!(
-                "HRC-CWL {:.2} ({})  dominant {}",
-                w.hrc_cwl,
-                w.category.name(),
-                a.dominant.indicator.map_or("none", |i| i.name())
-            ));
-        }
-        draw::text_lines(&mut img, &lines, draw::WHITE)?;
-        Ok(img)
     }
 }
 
@@ -953,30 +476,33 @@ mod tests {
         let opened = open_source(&CueInput::Bag(bag), &CameraArgs::default(), None).unwrap();
         assert!(opened.own_intrinsics);
         let arg = parse_intrinsics("600,610,320,240").unwrap();
-        let e = opened
-            .intrinsics_override(Some(arg))
+        let e = intrinsics_override(&opened, Some(arg))
             .unwrap_err()
             .to_string();
         assert!(e.contains("its own calibrated intrinsics"), "{e}");
-        assert!(opened.intrinsics_override(None).unwrap().is_none());
+        assert!(intrinsics_override(&opened, None).unwrap().is_none());
     }
 
+    /// `--depth` with a source that is not a video or an image folder is a usage error.
     #[cfg(feature = "vision")]
     #[test]
-    fn fixed_intrinsics_take_the_frame_size_and_refuse_another() {
-        let arg = parse_intrinsics("600,610,320,240").unwrap();
-        let mut fixed = FixedIntrinsics::new(arg);
-        let k = fixed.at(0, 640, 480).unwrap();
-        assert_eq!(
-            (k.width, k.height, k.fx, k.fy, k.cx, k.cy),
-            (640, 480, 600.0, 610.0, 320.0, 240.0)
-        );
-        assert_eq!(fixed.at(1, 640, 480).unwrap(), k);
-        let e = fixed.at(2, 320, 240).unwrap_err().to_string();
-        assert!(
-            e.starts_with("frame 2 is 320 x 240 px but the first frame was 640 x 480 px"),
-            "{e}"
-        );
+    fn depth_is_refused_for_cameras_and_bags() {
+        for input in [
+            CueInput::Camera,
+            CueInput::Bag(PathBuf::from("x.bag")),
+            CueInput::Webcam {
+                device: 0,
+                size: None,
+            },
+        ] {
+            let e = open_source(&input, &CameraArgs::default(), Some(Path::new("depth")))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("--depth applies to a video file or an image folder"),
+                "{e}"
+            );
+        }
     }
 
     #[test]

@@ -75,6 +75,23 @@ pub enum AssessError {
         /// What failed.
         message: String,
     },
+    /// An output (a landmark file, an image folder, a video) was refused so that nothing is
+    /// overwritten, or cannot hold what it was given.
+    #[error("{}: {message}", path.display())]
+    Output {
+        /// The file or folder.
+        path: PathBuf,
+        /// Why.
+        message: String,
+    },
+    /// Processing one camera frame failed.
+    #[error("frame {index}: {source}")]
+    Frame {
+        /// The source's frame number.
+        index: u64,
+        /// What failed.
+        source: Box<AssessError>,
+    },
     /// An image-processing or calibration step failed.
     #[error("{operation}: {message}")]
     Vision {

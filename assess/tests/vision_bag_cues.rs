@@ -11,11 +11,10 @@
 use std::path::PathBuf;
 
 use assess::vision::cues::{CueConfig, CueExtractor, CueQuality, load_canonical_face};
-use assess::vision::geometry::lift;
 use assess::vision::models::model_dir;
 use assess::vision::pipeline::{Pipeline, PipelineConfig};
 use assess::vision::source::realsense::RealSenseSource;
-use assess::vision::{Extrinsics, FrameSource};
+use assess::vision::{Extrinsics, FrameSource, lift};
 use nalgebra::{Point3, Vector3};
 use serde_json::Value;
 

@@ -253,7 +253,7 @@ fn the_person_at_the_operators_station_is_the_operator() {
     let intrinsics = assess::vision::Intrinsics::from_hfov(w, h, 69.0);
     let mut p = Pipeline::load(&model_dir(), PipelineConfig::static_images()).unwrap();
     let people = p.detect_people(&both).unwrap();
-    let centre = |d: &assess::vision::detect::Detection| {
+    let centre = |d: &assess::vision::Detection| {
         (
             f64::from(d.xmin + d.width / 2.0) * f64::from(w),
             f64::from(d.ymin + d.height / 2.0) * f64::from(h),

@@ -1,7 +1,7 @@
 //! Live camera cues for a trial (`hrc-adapt trial --cues camera`, feature `vision`).
 //!
 //! **Threads.** Perception runs in its own thread at camera rate: frame → landmarks → cues
-//! ([`crate::vision_cmd::Perception`]). It hands the latest [`CueFrame`] to the trial loop
+//! ([`assess::vision::Perception`]). It hands the latest [`CueFrame`] to the trial loop
 //! through a single slot (a mutex around one value, overwritten by each new frame): the trial
 //! loop never waits for perception, and a slow trial loop skips frames rather than queueing
 //! them. The source and the models are opened inside the thread; [`LiveCues::start`] returns
@@ -32,7 +32,8 @@ use assess::CueFrame;
 
 use super::cues::CameraSpec;
 use crate::vision_cmd::{
-    ImageSink, LandmarkCsv, Perception, load_extrinsics, open_source, pipeline_config,
+    LandmarkCsv, Perception, image_sink, intrinsics_override, load_extrinsics, open_source,
+    pipeline_config,
 };
 
 /// The trial folder's landmark file.
@@ -251,12 +252,12 @@ fn perceive(
     let mut perception = Perception::load(
         pipeline_config(&spec.camera, false),
         extrinsics,
-        opened.intrinsics_override(spec.camera.intrinsics)?,
+        intrinsics_override(&opened, spec.camera.intrinsics)?,
         spec.station.as_ref(),
     )?;
     let mut landmarks = LandmarkCsv::create(landmarks_path)?;
     let mut video = match &spec.store_video {
-        Some(p) => Some(ImageSink::create(p, "--store-video", opened.fps)?),
+        Some(p) => Some(image_sink(p, "--store-video", opened.fps)?),
         None => None,
     };
     let mut seq = 0;
@@ -549,7 +550,10 @@ mod tests {
         )
         .unwrap_err();
         let e = e.with_causes().to_string();
-        assert!(e.contains("cannot open webcam 57 (/dev/video57)"), "{e}");
+        assert!(
+            e.contains("webcam 57: cannot open the camera (is /dev/video57 present"),
+            "{e}"
+        );
         // No trial was run, and no run folder is left.
         assert!(!dir.path().join("run").exists());
     }

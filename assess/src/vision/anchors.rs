@@ -4,7 +4,7 @@
 /// The anchor options of one detector (MediaPipe's `SsdAnchorsCalculatorOptions`, the subset
 /// the pose, palm and face detectors use).
 #[derive(Debug, Clone, PartialEq)]
-pub struct AnchorOptions {
+pub(crate) struct AnchorOptions {
     /// Model input width [px].
     pub input_width: u32,
     /// Model input height [px].
@@ -22,7 +22,7 @@ pub struct AnchorOptions {
 /// One anchor centre, normalised to the model input [-]. (Anchor width and height are 1: the
 /// detectors use fixed-size anchors.)
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Anchor {
+pub(crate) struct Anchor {
     /// Centre x [-].
     pub cx: f32,
     /// Centre y [-].
@@ -30,7 +30,7 @@ pub struct Anchor {
 }
 
 /// pose_detection: 224 × 224, 2254 anchors.
-pub const POSE_DETECTION: AnchorOptions = AnchorOptions {
+pub(crate) const POSE_DETECTION: AnchorOptions = AnchorOptions {
     input_width: 224,
     input_height: 224,
     min_scale: 0.148_437_5,
@@ -40,7 +40,7 @@ pub const POSE_DETECTION: AnchorOptions = AnchorOptions {
 };
 
 /// palm_detection (full and lite): 192 × 192, 2016 anchors.
-pub const PALM_DETECTION: AnchorOptions = AnchorOptions {
+pub(crate) const PALM_DETECTION: AnchorOptions = AnchorOptions {
     input_width: 192,
     input_height: 192,
     min_scale: 0.148_437_5,
@@ -50,7 +50,7 @@ pub const PALM_DETECTION: AnchorOptions = AnchorOptions {
 };
 
 /// face_detection_short_range: 128 × 128, 896 anchors.
-pub const FACE_DETECTION: AnchorOptions = AnchorOptions {
+pub(crate) const FACE_DETECTION: AnchorOptions = AnchorOptions {
     input_width: 128,
     input_height: 128,
     min_scale: 0.148_437_5,
@@ -62,7 +62,7 @@ pub const FACE_DETECTION: AnchorOptions = AnchorOptions {
 /// Generates the anchors in MediaPipe's order: layer by layer (equal strides merged), row by
 /// row, column by column, and per cell one anchor per scale: with aspect ratio 1 and the
 /// interpolated scale that is two anchors per layer of the merged group.
-pub fn generate(options: &AnchorOptions) -> Vec<Anchor> {
+pub(crate) fn generate(options: &AnchorOptions) -> Vec<Anchor> {
     let strides = options.strides;
     let mut anchors = Vec::new();
     let mut layer = 0;

@@ -6,7 +6,7 @@ use super::anchors::Anchor;
 
 /// Decoding parameters of one detector.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct DecodeOptions {
+pub(crate) struct DecodeOptions {
     /// Values per box: 4 box values + 2 per keypoint.
     pub num_coords: usize,
     /// Keypoints per box.
@@ -76,7 +76,7 @@ impl Detection {
 /// then keypoint x, y pairs, in input pixels relative to the anchor), `scores` one logit per
 /// anchor. Returns every box whose sigmoid score reaches `min_score`, in anchor order.
 /// Mismatched lengths give no detections.
-pub fn decode(
+pub(crate) fn decode(
     boxes: &[f32],
     scores: &[f32],
     anchors: &[Anchor],
@@ -125,7 +125,7 @@ pub fn decode(
 /// by the score-weighted mean (box corners and keypoints) of every remaining box that overlaps
 /// it by more than `iou_threshold` (itself included), keeping the best box's score. Output is
 /// in descending score order.
-pub fn weighted_nms(mut detections: Vec<Detection>, iou_threshold: f32) -> Vec<Detection> {
+pub(crate) fn weighted_nms(mut detections: Vec<Detection>, iou_threshold: f32) -> Vec<Detection> {
     // Stable sort by descending score, as MediaPipe's std::sort on (index, score) pairs with a
     // strict comparator (ties keep no particular order there; stable here).
     detections.sort_by(|a, b| b.score.total_cmp(&a.score));

@@ -6,7 +6,7 @@ use super::frame::{DepthImage, Intrinsics};
 
 /// A similarity transform `p ↦ scale · R · p + t` found by [`fit_similarity`].
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Similarity {
+pub(crate) struct Similarity {
     /// Rotation R.
     pub rotation: UnitQuaternion<f64>,
     /// Translation t [m].
@@ -19,7 +19,7 @@ pub struct Similarity {
 
 impl Similarity {
     /// Applies the transform to a point.
-    pub fn apply(&self, p: &Point3<f64>) -> Point3<f64> {
+    pub(crate) fn apply(&self, p: &Point3<f64>) -> Point3<f64> {
         Point3::from(self.rotation * p.coords * self.scale + self.translation)
     }
 }
@@ -27,7 +27,7 @@ impl Similarity {
 /// Least-squares similarity (Umeyama 1991; Kabsch for the rotation) mapping `model` points
 /// onto `observed` points, with weights. `None` with fewer than three points, zero total
 /// weight or degenerate (collinear) points. With `allow_scale = false` the scale is 1.
-pub fn fit_similarity(
+pub(crate) fn fit_similarity(
     model: &[Point3<f64>],
     observed: &[Point3<f64>],
     weights: &[f64],
@@ -95,7 +95,7 @@ pub fn fit_similarity(
 
 /// The median valid depth [m] in a (2r+1)² patch around pixel (u, v) [px], ignoring zeros
 /// and values outside `range_m`; `None` when fewer than a third of the patch is valid.
-pub fn patch_depth(
+pub(crate) fn patch_depth(
     depth: &DepthImage,
     u: f64,
     v: f64,

@@ -50,20 +50,20 @@ pub struct NormRect {
 }
 
 /// Wraps an angle to [-π, π) [rad] (MediaPipe's `NormalizeRadians`).
-pub fn normalize_radians(angle: f32) -> f32 {
+pub(crate) fn normalize_radians(angle: f32) -> f32 {
     use std::f32::consts::PI;
     angle - 2.0 * PI * ((angle - (-PI)) / (2.0 * PI)).floor()
 }
 
 /// The rotation that brings the vector from point `a` to point `b` (pixels) to
 /// `target` [rad] (0: pointing right, π/2: pointing up in the image).
-pub fn rotation_between(a: [f32; 2], b: [f32; 2], target: f32) -> f32 {
+pub(crate) fn rotation_between(a: [f32; 2], b: [f32; 2], target: f32) -> f32 {
     normalize_radians(target - (-(b[1] - a[1])).atan2(b[0] - a[0]))
 }
 
 /// `DetectionsToRectsCalculator`: the detection's box as a rect, rotated so that keypoint
 /// `start` → `end` points at `target_deg` [deg]. `image` is (width, height) [px].
-pub fn rect_from_box(
+pub(crate) fn rect_from_box(
     d: &Detection,
     image: (u32, u32),
     start: usize,
@@ -88,7 +88,7 @@ pub fn rect_from_box(
 
 /// `AlignmentPointsRectsCalculator`: a square centred on keypoint `start` with side twice
 /// the distance to keypoint `end`, rotated so that `start` → `end` points at `target_deg`.
-pub fn rect_from_alignment(
+pub(crate) fn rect_from_alignment(
     d: &Detection,
     image: (u32, u32),
     start: usize,
@@ -101,7 +101,7 @@ pub fn rect_from_alignment(
 }
 
 /// [`rect_from_alignment`] on two normalised points.
-pub fn rect_from_points(
+pub(crate) fn rect_from_points(
     centre: [f32; 2],
     scale_point: [f32; 2],
     image: (u32, u32),
@@ -180,7 +180,7 @@ impl NormRect {
     }
 
     /// The rect in pixels.
-    pub fn to_pixels(&self, image: (u32, u32)) -> Roi {
+    pub(crate) fn to_pixels(self, image: (u32, u32)) -> Roi {
         let (iw, ih) = (f64::from(image.0), f64::from(image.1));
         Roi {
             cx: f64::from(self.cx) * iw,
@@ -215,7 +215,7 @@ impl NormRect {
 
 /// Pads a pixel-space ROI to the tensor's aspect ratio (letterboxing, `PadRoi`); returns the
 /// padded ROI (width, height) [px] and the padding fractions (left, top, right, bottom) [-].
-pub fn pad_to_aspect(width: f32, height: f32, tensor: (u32, u32)) -> ((f32, f32), [f32; 4]) {
+pub(crate) fn pad_to_aspect(width: f32, height: f32, tensor: (u32, u32)) -> ((f32, f32), [f32; 4]) {
     let tensor_aspect = tensor.1 as f32 / tensor.0 as f32;
     let roi_aspect = height / width;
     if tensor_aspect > roi_aspect {
@@ -229,7 +229,7 @@ pub fn pad_to_aspect(width: f32, height: f32, tensor: (u32, u32)) -> ((f32, f32)
 
 /// Border handling of a crop outside the image.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Border {
+pub(crate) enum Border {
     /// Black outside the image (detectors).
     Zero,
     /// Edge pixels repeated (landmark models).
@@ -238,7 +238,7 @@ pub enum Border {
 
 /// A reusable crop: the 8-bit warp buffer and the float tensor (NHWC, RGB).
 #[derive(Debug)]
-pub struct CropBuffer {
+pub(crate) struct CropBuffer {
     width: u32,
     height: u32,
     pixels: Vec<u8>,
@@ -248,7 +248,7 @@ pub struct CropBuffer {
 
 impl CropBuffer {
     /// A buffer for a `width` × `height` model input [px].
-    pub fn new(width: u32, height: u32) -> Self {
+    pub(crate) fn new(width: u32, height: u32) -> Self {
         let n = width as usize * height as usize * 3;
         Self {
             width,
@@ -258,8 +258,9 @@ impl CropBuffer {
         }
     }
 
-    /// The 8-bit crop of the last [`crop_to_tensor`] (RGB, row-major).
-    pub fn pixels(&self) -> &[u8] {
+    /// The 8-bit crop of the last [`crop_to_tensor`] (RGB, row-major); read by the unit tests.
+    #[cfg(test)]
+    pub(crate) fn pixels(&self) -> &[u8] {
         &self.pixels
     }
 }
@@ -273,7 +274,7 @@ fn cv(operation: &'static str) -> impl Fn(opencv::Error) -> AssessError {
 
 /// Crops `roi` (pixels; rotation about its centre) out of `image` into `out`, resampled with
 /// OpenCV's bilinear `warpPerspective`, and scales the values to [range.0, range.1].
-pub fn crop_to_tensor(
+pub(crate) fn crop_to_tensor(
     image: &RgbImage,
     roi: &Roi,
     range: (f32, f32),
