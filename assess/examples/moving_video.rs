@@ -6,6 +6,10 @@
 //! - `moving_video make <dir> [--frames N]` writes the frames of `tests/support/moving.rs`
 //!   (SIMULATED motion of `data/images/pose_sitting.jpg`, 640 × 480) as lossless PNGs
 //!   `<dir>/000000.png`, … and `<dir>/frames.json` (each frame's motion and checksum).
+//! - `moving_video make <dir> --scene enter-leave|hand-exit|low-light [--frames N]` writes one
+//!   of the SIMULATED scenes of `tests/support/scenes.rs` instead (a person entering and
+//!   leaving, a hand leaving the frame, low light; by default the scene's own frame count), for
+//!   the references of the test `vision_scenes.rs`.
 //! - `moving_video run <dir> <out.json>` decodes every PNG of `<dir>` first (timed on its own),
 //!   then runs [`Pipeline`] in tracking mode with the default (full) models and extracts the
 //!   cues (no depth: the PnP head pose) as the trial does, frame by frame, at 30 fps camera
@@ -29,6 +33,8 @@ use assess::vision::{Extrinsics, Intrinsics, Landmark, RgbImage, models};
 
 #[path = "../tests/support/moving.rs"]
 mod moving;
+#[path = "../tests/support/scenes.rs"]
+mod scenes;
 
 type Res<T> = Result<T, Box<dyn std::error::Error>>;
 
@@ -80,26 +86,57 @@ fn runs_json(r: &RunCounts) -> serde_json::Value {
     })
 }
 
-fn make(dir: &Path, frames: usize) -> Res<()> {
-    let photo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/images/pose_sitting.jpg");
+/// Writes `frames` frames of `scene` (`None`: the pan/zoom/roll video of `moving.rs`).
+fn make(dir: &Path, frames: usize, scene: Option<scenes::Scene>) -> Res<()> {
+    let name = scene.map_or("pose_sitting.jpg", scenes::Scene::photo);
+    let photo = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../data/images")
+        .join(name);
     let src = RgbImage::read(&photo)?;
     std::fs::create_dir_all(dir)?;
     let mut list = Vec::with_capacity(frames);
     for k in 0..frames {
-        let f = moving::frame(&src, k);
+        let (f, motion) = match scene {
+            None => {
+                let (pan, zoom, roll) = moving::motion(k);
+                let m = serde_json::json!({"pan_px": pan, "zoom": zoom, "roll_deg": roll});
+                (moving::frame(&src, k), m)
+            }
+            Some(s) => {
+                let (scale, pan, roll) = s.motion(k);
+                let m = serde_json::json!({"scale": scale, "pan_px": pan, "roll_deg": roll});
+                (s.frame(&src, k), m)
+            }
+        };
         assess::vision::calib::write_png(&f, dir.join(format!("{k:06}.png")))?;
-        let (pan, zoom, roll) = moving::motion(k);
-        list.push(serde_json::json!({
+        let mut entry = serde_json::json!({
             "frame": k,
-            "pan_px": pan,
-            "zoom": zoom,
-            "roll_deg": roll,
             "fnv1a": format!("{:016x}", moving::fnv1a(&f.data)),
-        }));
+        });
+        entry
+            .as_object_mut()
+            .unwrap()
+            .extend(motion.as_object().unwrap().clone());
+        list.push(entry);
     }
+    let fixture = scene.map_or("mediapipe_moving.json".to_owned(), scenes::Scene::fixture);
+    let (made_by, simulated) = match scene {
+        None => (
+            "assess/examples/moving_video.rs make (tests/support/moving.rs)".to_owned(),
+            "SIMULATED motion (pan, zoom, roll) of the real photo data/images/pose_sitting.jpg",
+        ),
+        Some(s) => (
+            format!(
+                "assess/examples/moving_video.rs make --scene {} (tests/support/scenes.rs)",
+                s.name()
+            ),
+            s.description(),
+        ),
+    };
     let doc = serde_json::json!({
-        "made_by": "assess/examples/moving_video.rs make (tests/support/moving.rs)",
-        "simulated": "SIMULATED motion (pan, zoom, roll) of the real photo data/images/pose_sitting.jpg",
+        "made_by": made_by,
+        "simulated": simulated,
+        "fixture": format!("assess/tests/fixtures/vision/{fixture}"),
         "width": moving::W,
         "height": moving::H,
         "fps": moving::FPS,
@@ -195,18 +232,32 @@ fn run(dir: &Path, out: &Path) -> Res<()> {
 
 fn main() -> Res<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: moving_video make <dir> [--frames N] | moving_video run <dir> <out.json>";
+    let usage = "usage: moving_video make <dir> [--scene enter-leave|hand-exit|low-light] \
+                 [--frames N] | moving_video run <dir> <out.json>";
+    let frames = |n: &str| match n.parse::<usize>() {
+        Ok(n) if n > 0 => Ok(n),
+        _ => Err(format!(
+            "--frames must be a positive whole number (got {n})"
+        )),
+    };
+    let scene = |name: &str| {
+        scenes::Scene::parse(name).ok_or_else(|| format!("unknown --scene {name}\n{usage}"))
+    };
     match args
         .iter()
         .map(String::as_str)
         .collect::<Vec<_>>()
         .as_slice()
     {
-        ["make", dir] => make(Path::new(dir), 300),
-        ["make", dir, "--frames", n] => match n.parse::<usize>() {
-            Ok(n) if n > 0 => make(Path::new(dir), n),
-            _ => Err(format!("--frames must be a positive whole number (got {n})").into()),
-        },
+        ["make", dir] => make(Path::new(dir), 300, None),
+        ["make", dir, "--frames", n] => make(Path::new(dir), frames(n)?, None),
+        ["make", dir, "--scene", s] => {
+            let s = scene(s)?;
+            make(Path::new(dir), s.frames(), Some(s))
+        }
+        ["make", dir, "--scene", s, "--frames", n] | ["make", dir, "--frames", n, "--scene", s] => {
+            make(Path::new(dir), frames(n)?, Some(scene(s)?))
+        }
         ["run", dir, out] => run(Path::new(dir), Path::new(out)),
         _ => Err(usage.into()),
     }

@@ -24,32 +24,15 @@
 
 use std::path::PathBuf;
 
-use assess::vision::models::model_dir;
-use assess::vision::pipeline::{Mode, Pipeline, PipelineConfig};
-use assess::vision::{Landmark, RgbImage};
+use assess::vision::RgbImage;
 use serde_json::Value;
 
+#[path = "support/compare.rs"]
+mod compare;
 #[path = "support/moving.rs"]
 mod moving;
 
-fn xy(v: &Value) -> [f64; 2] {
-    [v[0].as_f64().unwrap(), v[1].as_f64().unwrap()]
-}
-
-fn d(a: [f64; 2], b: [f64; 2]) -> f64 {
-    (a[0] - b[0]).hypot(a[1] - b[1])
-}
-
-/// The largest distance over `idx` between ours and the reference [px].
-fn worst(ours: &[Landmark], theirs: &[Value], idx: impl Iterator<Item = usize>) -> f64 {
-    idx.map(|i| d([ours[i].x, ours[i].y], xy(&theirs[i])))
-        .fold(0.0, f64::max)
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
+use compare::{Stats, d, worst, xy};
 
 #[test]
 fn tracking_on_moving_video_against_mediapipe_video_mode() {
@@ -61,14 +44,7 @@ fn tracking_on_moving_video_against_mediapipe_video_mode() {
     let refs = reference["frames"].as_array().unwrap();
     assert_eq!(refs.len(), 120);
     let photo = RgbImage::read(&root.join("../data/images/pose_sitting.jpg")).unwrap();
-    let mut p = Pipeline::load(
-        &model_dir(),
-        PipelineConfig {
-            mode: Mode::Tracking,
-            ..PipelineConfig::default()
-        },
-    )
-    .unwrap();
+    let mut p = compare::tracking_pipeline();
 
     let (mut pose, mut core, mut face, mut hands) = (vec![], vec![], vec![], vec![]);
     for (k, r) in refs.iter().enumerate() {
@@ -119,24 +95,13 @@ fn tracking_on_moving_video_against_mediapipe_video_mode() {
             }
         }
     }
-    /// Median, max and the number over 5 % of one error series.
-    struct Stats {
-        median: f64,
-        max: f64,
-        over_5pct: usize,
-    }
-    let stats = |v: &[f64]| Stats {
-        median: median(v.to_vec()),
-        max: v.iter().copied().fold(0.0, f64::max),
-        over_5pct: v.iter().filter(|&&e| e > 0.05).count(),
-    };
-    let (pose, core, face, n_hands, hands) = (
-        stats(&pose),
-        stats(&core),
-        stats(&face),
-        hands.len(),
-        stats(&hands),
+    let (pose, core, face, hands) = (
+        Stats::of(&pose),
+        Stats::of(&core),
+        Stats::of(&face),
+        Stats::of(&hands),
     );
+    let n_hands = hands.n;
     println!(
         "pose worst: median {:.1} %, max {:.1} %; nose/shoulders/hips: median {:.1} %, max {:.1} % \
          ({} frames over 5 %); face: max {:.2} %; hands from frame 1: median {:.1} %, max {:.1} % \

@@ -32,10 +32,16 @@ pub(crate) fn motion(k: usize) -> (f64, f64, f64) {
 /// Frame `k` made from `src`.
 pub(crate) fn frame(src: &RgbImage, k: usize) -> RgbImage {
     let (pan, zoom, roll) = motion(k);
-    let scale = 0.75 * zoom;
+    warp(src, 0.75 * zoom, [pan, 0.0], roll)
+}
+
+/// `src` scaled by `scale` about its centre, rolled by `roll` [deg] (counter-clockwise on
+/// screen) and placed with its centre `pan` [px] (right, down) off the centre of a W × H frame;
+/// bilinear, black outside the photo. Also the warp of the scenes of `scenes.rs`.
+pub(crate) fn warp(src: &RgbImage, scale: f64, pan: [f64; 2], roll: f64) -> RgbImage {
     let (s, c) = roll.to_radians().sin_cos();
     let (scx, scy) = (f64::from(src.width) / 2.0, f64::from(src.height) / 2.0);
-    let (ocx, ocy) = (f64::from(W) / 2.0 + pan, f64::from(H) / 2.0);
+    let (ocx, ocy) = (f64::from(W) / 2.0 + pan[0], f64::from(H) / 2.0 + pan[1]);
     let mut out = RgbImage::black(W, H);
     let sw = src.width as usize;
     let at = |x: i64, y: i64, ch: usize| -> f64 {
