@@ -1208,7 +1208,7 @@ impl Pipeline {
             // hand is neither reported nor tracked (tracking it would hold a slot the
             // operator's hand needs).
             if found.iter().any(|h| same_hand(h, &hand))
-                || pose.is_some_and(|p| !belongs_to(&hand, p))
+                || pose.is_some_and(|p| !belongs_to(&hand, p, size))
             {
                 continue;
             }
@@ -1240,16 +1240,28 @@ fn rect_from_points_opt(
     roi::rect_from_points(*norm.get(a)?, *norm.get(b)?, size, 90.0)
 }
 
-/// Whether a hand belongs to the person of `pose`: its wrist lies within 0.6 shoulder widths
-/// of one of the pose's wrists (which the pose model predicts even when they are out of view).
-/// A hand of someone else next to the operator is dropped.
-pub fn belongs_to(hand: &HandLandmarks, pose: &PoseLandmarks) -> bool {
+/// Whether a hand may belong to the person of `pose` on an image of `size` [px]: its wrist
+/// lies within 0.6 shoulder widths of one of the pose's wrists, or the pose does not know
+/// where one of its wrists is. The pose knows a wrist it sees (visibility > 0.5) and a wrist
+/// it places outside the image (a person cut off by the frame); a wrist inside the image that
+/// it does not see is a guess. So a hand is someone else's, and dropped, only where the pose
+/// knows both its wrists and neither is near the hand.
+///
+/// On `two_children.jpeg` the boy's wrists lie below the image and the girl's hand on his
+/// shoulder is dropped (`tests/vision_robustness.rs`); on a photo of a lone hand, mediapipe's
+/// pose model, as ours, reports a "pose" with unseen wrists in the image far from the hand,
+/// and the hand is kept (`tests/vision_scenes.rs`, the hand-exit scene).
+pub fn belongs_to(hand: &HandLandmarks, pose: &PoseLandmarks, size: (u32, u32)) -> bool {
     let p = &pose.points;
     let shoulders = (p[11].x - p[12].x).hypot(p[11].y - p[12].y);
     let w = &hand.points[0];
-    [&p[15], &p[16]]
-        .iter()
-        .any(|pw| (pw.x - w.x).hypot(pw.y - w.y) <= 0.6 * shoulders.max(1.0))
+    let inside = |l: &Landmark| {
+        (0.0..f64::from(size.0)).contains(&l.x) && (0.0..f64::from(size.1)).contains(&l.y)
+    };
+    [&p[15], &p[16]].iter().any(|pw| {
+        let unknown = pw.visibility <= 0.5 && inside(pw);
+        unknown || (pw.x - w.x).hypot(pw.y - w.y) <= 0.6 * shoulders.max(1.0)
+    })
 }
 
 /// Whether two hand landmark sets are the same hand (wrists closer than a quarter of the
@@ -1593,5 +1605,89 @@ mod tests {
         );
         // Without the memory the passer ranks first.
         assert_eq!(rank_operators(&dets, SIZE, None, None, None), [0, 1]);
+    }
+
+    /// A pose with shoulders at (200, 100) and (300, 100) (width 100 px) and wrists at
+    /// `left`/`right` [px] with visibilities `vis` [-]; and a hand with its wrist at `at` [px].
+    fn pose_and_hand(
+        left: [f64; 2],
+        right: [f64; 2],
+        vis: [f64; 2],
+        at: [f64; 2],
+    ) -> (PoseLandmarks, HandLandmarks) {
+        let roi = roi::Roi {
+            cx: 0.0,
+            cy: 0.0,
+            width: 1.0,
+            height: 1.0,
+            rotation: 0.0,
+        };
+        let lm = |x: f64, y: f64, visibility: f64| Landmark {
+            x,
+            y,
+            visibility,
+            ..Landmark::default()
+        };
+        let mut points = [lm(0.0, 0.0, 1.0); 33];
+        points[11] = lm(300.0, 100.0, 1.0);
+        points[12] = lm(200.0, 100.0, 1.0);
+        points[15] = lm(left[0], left[1], vis[0]);
+        points[16] = lm(right[0], right[1], vis[1]);
+        let mut hand = [lm(0.0, 0.0, 1.0); 21];
+        hand[0] = lm(at[0], at[1], 1.0);
+        (
+            PoseLandmarks {
+                points,
+                score: 1.0,
+                roi,
+            },
+            HandLandmarks {
+                points: hand,
+                score: 1.0,
+                right_hand: 0.5,
+                roi,
+            },
+        )
+    }
+
+    #[test]
+    fn a_hand_near_a_seen_wrist_belongs_and_one_far_from_both_does_not() {
+        let (l, r) = ([320.0, 250.0], [180.0, 250.0]);
+        // 59 px from the left wrist: within 0.6 × 100 px.
+        let (pose, hand) = pose_and_hand(l, r, [0.9, 0.9], [320.0, 309.0]);
+        assert!(belongs_to(&hand, &pose, SIZE));
+        // 61 px from the left wrist, farther from the right one: someone else's.
+        let (pose, hand) = pose_and_hand(l, r, [0.9, 0.9], [320.0, 311.0]);
+        assert!(!belongs_to(&hand, &pose, SIZE));
+    }
+
+    #[test]
+    fn a_far_hand_may_be_the_one_of_an_unseen_wrist_in_the_image() {
+        let (l, r) = ([320.0, 250.0], [180.0, 250.0]);
+        let far = [600.0, 400.0];
+        for vis in [[0.5, 0.9], [0.9, 0.5], [0.1, 0.2]] {
+            let (pose, hand) = pose_and_hand(l, r, vis, far);
+            assert!(belongs_to(&hand, &pose, SIZE), "{vis:?}");
+        }
+        let (pose, hand) = pose_and_hand(l, r, [0.51, 0.51], far);
+        assert!(!belongs_to(&hand, &pose, SIZE));
+    }
+
+    #[test]
+    fn unseen_wrists_outside_the_image_are_known_to_be_elsewhere() {
+        // Both wrists below the 480 px image (and one left of it), unseen: a hand in view far
+        // from both is someone else's; near one (in the image's margin) it may be his.
+        let (l, r) = ([320.0, 700.0], [-40.0, 600.0]);
+        let (pose, hand) = pose_and_hand(l, r, [0.1, 0.1], [320.0, 300.0]);
+        assert!(!belongs_to(&hand, &pose, SIZE));
+        let (pose, hand) = pose_and_hand(l, r, [0.1, 0.1], [10.0, 470.0]);
+        assert!(!belongs_to(&hand, &pose, SIZE));
+        let (pose, hand) = pose_and_hand(l, r, [0.1, 0.1], [320.0, 470.0]);
+        assert!(!belongs_to(&hand, &pose, SIZE));
+        let (pose, hand) = pose_and_hand([320.0, 520.0], r, [0.1, 0.1], [320.0, 470.0]);
+        assert!(belongs_to(&hand, &pose, SIZE));
+        // One wrist in the image, unseen: unknown, so the hand is kept.
+        let (pose, hand) = pose_and_hand([320.0, 479.0], r, [0.1, 0.1], [320.0, 300.0]);
+        assert!(belongs_to(&hand, &pose, SIZE));
     }
 }
