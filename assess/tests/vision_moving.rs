@@ -15,6 +15,12 @@
 //! pan and roll; 24.6 % and 5 over when new hands came from the pose's wrists instead of palm
 //! detection).
 //!
+//! The model's own sensitivity, measured the same way: ours against ours on the frames panned
+//! 0.3 px (`compare::SelfShift`): pose worst median 11.3 %, max 33.7 %; nose/shoulders/hips
+//! max 4.4 %; hands max 18.0 % (18 of 240 over 5 %). So the pose worst median and the hands
+//! max are within what a 0.3 px change of the input moves the models by; the one
+//! nose/shoulders/hips frame over 5 % is not.
+//!
 //! The issue's tolerances are asserted where they hold (face ≤ 2 %; every landmark set found
 //! wherever mediapipe finds it). Where they do not yet hold (pose worst ≤ 10 % by median,
 //! nose/shoulders/hips ≤ 5 % max, hands ≤ 5 % from frame 1), the test bounds the median and
@@ -32,7 +38,7 @@ mod compare;
 #[path = "support/moving.rs"]
 mod moving;
 
-use compare::{Stats, d, worst, xy};
+use compare::{SHIFT_PX, SelfShift, Stats, d, worst, xy};
 
 #[test]
 fn tracking_on_moving_video_against_mediapipe_video_mode() {
@@ -45,6 +51,7 @@ fn tracking_on_moving_video_against_mediapipe_video_mode() {
     assert_eq!(refs.len(), 120);
     let photo = RgbImage::read(&root.join("../data/images/pose_sitting.jpg")).unwrap();
     let mut p = compare::tracking_pipeline();
+    let (mut q, mut shift) = (compare::tracking_pipeline(), SelfShift::default());
 
     let (mut pose, mut core, mut face, mut hands) = (vec![], vec![], vec![], vec![]);
     for (k, r) in refs.iter().enumerate() {
@@ -55,6 +62,12 @@ fn tracking_on_moving_video_against_mediapipe_video_mode() {
             "frame {k} differs from the frame the reference was made from"
         );
         let lm = p.process_at(k as f64 / moving::FPS, &frame, None).unwrap();
+        let shifted = moving::frame_shifted(&photo, k, SHIFT_PX);
+        shift.add(
+            &lm,
+            &q.process_at(k as f64 / moving::FPS, &shifted, None)
+                .unwrap(),
+        );
 
         let rp = r["pose"]
             .as_array()
@@ -102,6 +115,20 @@ fn tracking_on_moving_video_against_mediapipe_video_mode() {
         Stats::of(&hands),
     );
     let n_hands = hands.n;
+    let (shift_pose, shift_core, shift_hands) = shift.stats();
+    println!(
+        "ours against ours on the frames panned {SHIFT_PX} px: pose worst median {:.1} %, max \
+         {:.1} %; nose/shoulders/hips median {:.1} %, max {:.1} %; hands median {:.1} %, max \
+         {:.1} % ({} of {} over 5 %)",
+        100.0 * shift_pose.median,
+        100.0 * shift_pose.max,
+        100.0 * shift_core.median,
+        100.0 * shift_core.max,
+        100.0 * shift_hands.median,
+        100.0 * shift_hands.max,
+        shift_hands.over_5pct,
+        shift_hands.n,
+    );
     println!(
         "pose worst: median {:.1} %, max {:.1} %; nose/shoulders/hips: median {:.1} %, max {:.1} % \
          ({} frames over 5 %); face: max {:.2} %; hands from frame 1: median {:.1} %, max {:.1} % \
@@ -118,8 +145,15 @@ fn tracking_on_moving_video_against_mediapipe_video_mode() {
     );
     // The issue's tolerance, met: face ≤ 2 % of the eye-corner distance on every frame.
     assert!(face.max <= 0.02, "face max {:.3}", face.max);
-    // Not yet met (issue: pose worst ≤ 10 % by median): bounded near the measured 10.5 %.
-    assert!(pose.median <= 0.12, "pose worst median {:.3}", pose.median);
+    // Not met (issue: pose worst ≤ 10 % by median), prevented by the model's own sensitivity:
+    // a 0.3 px pan alone moves it by a median over 10 % (11.3 % measured), more than ours
+    // differs from mediapipe's (10.5 %).
+    assert!(shift_pose.median > 0.10, "shift {:.3}", shift_pose.median);
+    assert!(
+        pose.median <= shift_pose.median,
+        "pose worst median {:.3}",
+        pose.median
+    );
     // Not yet met (issue: nose, shoulders, hips ≤ 5 % max): measured median 1.6 %, one frame
     // over 5 %.
     assert!(core.median <= 0.03, "core median {:.3}", core.median);
@@ -135,4 +169,7 @@ fn tracking_on_moving_video_against_mediapipe_video_mode() {
     assert!(hands.median <= 0.02, "hands median {:.3}", hands.median);
     assert!(hands.over_5pct <= 8, "hands over 5 %: {}", hands.over_5pct);
     assert!(hands.max <= 0.20, "hands max {:.3}", hands.max);
+    // Within the model's own sensitivity: a 0.3 px pan alone moves a hand by up to 18.0 %.
+    assert!(shift_hands.max > 0.05, "shift {:.3}", shift_hands.max);
+    assert!(hands.max <= shift_hands.max, "hands max {:.3}", hands.max);
 }

@@ -34,7 +34,7 @@ mod moving;
 #[path = "support/scenes.rs"]
 mod scenes;
 
-use compare::{Stats, d, worst, xy};
+use compare::{SHIFT_PX, SelfShift, Stats, d, worst, xy};
 use scenes::Scene;
 
 /// What one scene measured.
@@ -49,6 +49,12 @@ struct Measured {
     face_presence: Vec<usize>,
     /// Frames where the numbers of hands differ: (frame, ours, mediapipe's).
     hands_presence: Vec<(usize, usize, usize)>,
+    /// Our hands with no mediapipe hand within the hand's wrist–middle-knuckle length:
+    /// (frame, wrist [px], length [px]).
+    unmatched_hands: Vec<(usize, [f64; 2], f64)>,
+    /// Our own pose worst, nose/shoulders/hips and hands against ours on the frames panned
+    /// by `compare::SHIFT_PX`.
+    shift: (Stats, Stats, Stats),
 }
 
 fn measure(scene: Scene) -> Measured {
@@ -65,9 +71,11 @@ fn measure(scene: Scene) -> Measured {
     assert_eq!(refs.len(), scene.frames());
     let photo = RgbImage::read(&root.join("../data/images").join(scene.photo())).unwrap();
     let mut p = compare::tracking_pipeline();
+    let (mut q, mut shift) = (compare::tracking_pipeline(), SelfShift::default());
 
     let (mut pose, mut core, mut face, mut hands) = (vec![], vec![], vec![], vec![]);
     let (mut pose_presence, mut face_presence, mut hands_presence) = (vec![], vec![], vec![]);
+    let mut unmatched_hands = vec![];
     let mut previous_hands: &[Value] = &[];
     for (k, r) in refs.iter().enumerate() {
         let frame = scene.frame(&photo, k);
@@ -78,6 +86,12 @@ fn measure(scene: Scene) -> Measured {
             scene.name()
         );
         let lm = p.process_at(k as f64 / moving::FPS, &frame, None).unwrap();
+        let shifted = scene.frame_shifted(&photo, k, SHIFT_PX);
+        shift.add(
+            &lm,
+            &q.process_at(k as f64 / moving::FPS, &shifted, None)
+                .unwrap(),
+        );
 
         match (r["pose"].as_array(), lm.pose.as_ref()) {
             (Some(rp), Some(ours)) => {
@@ -99,6 +113,13 @@ fn measure(scene: Scene) -> Measured {
         let rh = r["hands"].as_array().unwrap();
         if lm.hands.len() != rh.len() {
             hands_presence.push((k, lm.hands.len(), rh.len()));
+        }
+        for h in &lm.hands {
+            let wrist = [h.points[0].x, h.points[0].y];
+            let length = d(wrist, [h.points[9].x, h.points[9].y]);
+            if !rh.iter().any(|q| d(xy(&q[0]), wrist) < length) {
+                unmatched_hands.push((k, wrist, length));
+            }
         }
         for h in rh {
             let h = h.as_array().unwrap();
@@ -127,6 +148,8 @@ fn measure(scene: Scene) -> Measured {
         pose_presence,
         face_presence,
         hands_presence,
+        unmatched_hands,
+        shift: shift.stats(),
     }
 }
 
@@ -152,6 +175,14 @@ fn report(scene: Scene, m: &Measured) {
         m.pose_presence,
         m.face_presence,
         m.hands_presence,
+    );
+    println!(
+        "[{}] ours against ours on the frames panned {SHIFT_PX} px: pose worst: {}; \
+         nose/shoulders/hips: {}; hands: {}",
+        scene.name(),
+        pct(&m.shift.0),
+        pct(&m.shift.1),
+        pct(&m.shift.2),
     );
 }
 
@@ -180,17 +211,26 @@ fn at_most_n<T: std::fmt::Debug>(what: &str, items: &[T], bound: usize) {
 /// 997.8 % (6 of 37 over 5 %); presence disagreements: pose 6 frames (17, 21, 23–26, while the
 /// person slides in and mediapipe's own pose flickers on and off), face 4 (34, 68, 71, 72),
 /// hands 23 (while entering and leaving, mediapipe's hands flicker too).
+///
+/// The model's own sensitivity, measured: ours against ours on the frames panned 0.3 px moves
+/// nose/shoulders/hips by up to 600.2 % on the partly-visible frames, as far as ours differs
+/// from mediapipe's there (589.5 %): on those frames no tolerance is meaningful. The pose
+/// worst median (15.3 % against 13.0 % for the shift) and the hands (997.8 % against 30.8 %)
+/// are not explained so.
 #[test]
 fn person_entering_and_leaving_against_mediapipe_video_mode() {
     let m = measure(Scene::EnterLeave);
     report(Scene::EnterLeave, &m);
+    let (_, shift_core, _) = &m.shift;
     assert!(m.pose.n >= 60 && m.face.n >= 39 && m.hands.n >= 37);
     // The issue's tolerance, met: face ≤ 2 %.
     at_most("face max", m.face.max, FACE_MAX);
     // Not met (issue: pose worst ≤ 10 % by median): bounded at the measured 15.3 %.
     at_most("pose median", m.pose.median, 0.154);
     // Not met (issue: nose, shoulders, hips ≤ 5 % max): bounded at the measured 589.5 %, 8
-    // frames over 5 %, median 2.4 %.
+    // frames over 5 %, median 2.4 %. A 0.3 px pan alone moves them by over 100 % on the
+    // partly-visible frames.
+    assert!(shift_core.max > 1.0, "shift {:.3}", shift_core.max);
     at_most("core max", m.core.max, 5.90);
     at_most("core median", m.core.median, 0.025);
     assert!(m.core.over_5pct <= 8, "core over 5 %: {}", m.core.over_5pct);
@@ -202,15 +242,25 @@ fn person_entering_and_leaving_against_mediapipe_video_mode() {
         "hands over 5 %: {}",
         m.hands.over_5pct
     );
-    // Presence: both find no pose, face or hand on the 8 empty frames at either end and agree
-    // elsewhere but for the measured disagreements (not yet justified as transition frames).
-    for k in (0..8).chain(92..100) {
-        assert!(
-            !m.pose_presence.contains(&k) && !m.face_presence.contains(&k),
-            "frame {k}"
-        );
-        assert!(m.hands_presence.iter().all(|h| h.0 != k), "frame {k}");
-    }
+    // Presence: every disagreement is on a frame where the person slides in (8–35) or out
+    // (64–91); both agree on the 28 frames where the person sits still in full view (36–63)
+    // and on the 8 empty frames at either end.
+    let moving = |k: usize| (8..36).contains(&k) || (64..92).contains(&k);
+    assert!(
+        m.pose_presence.iter().all(|&k| moving(k)),
+        "{:?}",
+        m.pose_presence
+    );
+    assert!(
+        m.face_presence.iter().all(|&k| moving(k)),
+        "{:?}",
+        m.face_presence
+    );
+    assert!(
+        m.hands_presence.iter().all(|h| moving(h.0)),
+        "{:?}",
+        m.hands_presence
+    );
     at_most_n("pose presence", &m.pose_presence, 6);
     at_most_n("face presence", &m.face_presence, 4);
     at_most_n("hands presence", &m.hands_presence, 23);
@@ -279,25 +329,42 @@ fn hand_leaving_the_frame_against_mediapipe_video_mode() {
     assert_eq!(found, theirs, "hands on frames 60–69, ours and mediapipe's");
 }
 
-/// Low light. Measured at commit time: pose worst median 21.5 %, max 81.8 %; nose/shoulders/hips
-/// median 1.8 %, max 6.7 % (3 of 90 frames over 5 %); face max 1.09 %; hands median 0.8 %, max
-/// 93.8 % (14 of 100 hand-frames over 5 %); presence: pose and face agree on every frame, the
-/// number of hands differs on 63 frames (mostly ours 2, mediapipe's 1, from frame 20 on; ours
-/// also takes a hand ROI from the pose's wrist where palm detection finds none, which
-/// mediapipe's Hands does not: a likely cause, not yet verified).
+/// Low light. Measured at commit time (the test prints them): pose worst median 21.5 %, max
+/// 81.8 %; nose/shoulders/hips median 1.8 %, max 6.7 % (3 of 90 frames over 5 %); face max
+/// 1.09 %; hands median 0.8 %, max 93.8 % (14 of 100 hand-frames over 5 %).
+///
+/// Where the model's own sensitivity prevents a tolerance, measured: ours against ours on the
+/// same dark frames panned 0.3 px moves the worst pose landmark by a median 33.6 % (the seated
+/// person's right knee, ankle, heel and foot in the dark) and nose/shoulders/hips by up to
+/// 7.5 %, more than ours differs from mediapipe's (21.5 %, 6.7 %). The hands (max 93.8 %
+/// against 59.8 % for the shift) are not explained so.
+///
+/// Presence: pose and face agree on every frame; the number of hands differs on 63 frames,
+/// mostly ours 2 and mediapipe's 1. Mediapipe's palm detector misses the second hand in the
+/// dark; ours finds it from the pose's wrist. It is a real hand: mediapipe finds it on the same
+/// frames lit (`mediapipe_moving.json`, the pan/zoom/roll of `vision_moving.rs` before the
+/// darkening), which the test checks for each of our hands mediapipe does not have.
 #[test]
 fn low_light_against_mediapipe_video_mode() {
     let m = measure(Scene::LowLight);
     report(Scene::LowLight, &m);
+    let (shift_pose, shift_core, _) = &m.shift;
     assert!(m.pose.n == 90 && m.face.n == 90 && m.hands.n >= 100);
     // The issue's tolerances, met: face ≤ 2 %; pose and face found wherever mediapipe finds
     // them and nowhere else.
     at_most("face max", m.face.max, FACE_MAX);
     at_most_n("pose presence", &m.pose_presence, 0);
     at_most_n("face presence", &m.face_presence, 0);
-    // Not met (issue: pose worst ≤ 10 % by median): bounded at the measured 21.5 %.
+    // Not met (issue: pose worst ≤ 10 % by median), prevented by the model's own sensitivity:
+    // a 0.3 px pan alone moves it by more than 10 %, and by more than ours differs from
+    // mediapipe's. Bounded at the measured 21.5 %.
+    assert!(shift_pose.median > 0.10, "shift {:.3}", shift_pose.median);
+    at_most("pose median", m.pose.median, shift_pose.median);
     at_most("pose median", m.pose.median, 0.216);
-    // Not met (issue: nose, shoulders, hips ≤ 5 % max): bounded at the measured 6.7 %, 3 over.
+    // Not met (issue: nose, shoulders, hips ≤ 5 % max), within the model's own sensitivity
+    // (a 0.3 px pan alone: 7.5 %). Bounded at the measured 6.7 %, 3 over.
+    assert!(shift_core.max > 0.05, "shift {:.3}", shift_core.max);
+    at_most("core max", m.core.max, shift_core.max);
     at_most("core max", m.core.max, 0.068);
     assert!(m.core.over_5pct <= 3, "core over 5 %: {}", m.core.over_5pct);
     // Not met (issue: hands ≤ 5 %): bounded at the measured 93.8 %, 14 of 100 over 5 %.
@@ -309,4 +376,22 @@ fn low_light_against_mediapipe_video_mode() {
         m.hands.over_5pct
     );
     at_most_n("hands presence", &m.hands_presence, 63);
+
+    // Every hand of ours that mediapipe does not find in the dark, mediapipe finds lit.
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let lit: Value = serde_json::from_str(
+        &std::fs::read_to_string(root.join("tests/fixtures/vision/mediapipe_moving.json")).unwrap(),
+    )
+    .unwrap();
+    let lit = lit["frames"].as_array().unwrap();
+    assert!(m.unmatched_hands.len() >= 60, "{}", m.unmatched_hands.len());
+    for (k, wrist, _) in &m.unmatched_hands {
+        let hands = lit[*k]["hands"].as_array().unwrap();
+        assert!(
+            hands
+                .iter()
+                .any(|h| d(xy(&h[0]), *wrist) < d(xy(&h[0]), xy(&h[9]))),
+            "frame {k}: our hand at {wrist:?} is not one mediapipe finds lit"
+        );
+    }
 }

@@ -1,10 +1,11 @@
 //! Helpers of the tests comparing our landmarks with mediapipe's fixtures frame by frame
-//! (`vision_moving.rs`, `vision_scenes.rs`): distances in px and the statistics of an error
-//! series in the units of issue 13's tolerances.
+//! (`vision_moving.rs`, `vision_scenes.rs`): distances in px, the statistics of an error
+//! series in the units of issue 13's tolerances, and the models' own sensitivity in the same
+//! units ([`SelfShift`]).
 
-use assess::vision::Landmark;
 use assess::vision::models::model_dir;
 use assess::vision::pipeline::{Mode, Pipeline, PipelineConfig};
+use assess::vision::{Landmark, Landmarks};
 use serde_json::Value;
 
 /// Our pipeline in tracking mode (as mediapipe's video mode), default models.
@@ -53,5 +54,69 @@ impl Stats {
             over_5pct: s.iter().filter(|&&e| e > 0.05).count(),
             n: s.len(),
         }
+    }
+}
+
+/// The sub-pixel pan by which the tests measure the models' own sensitivity [px]: every frame
+/// made again with the photo panned 0.3 px further right and run through a second pipeline of
+/// its own. Issue 13: "a 0.3 px crop shift alone moves the pose model by several %".
+pub(crate) const SHIFT_PX: f64 = 0.3;
+
+/// Our landmarks against our landmarks on the frames panned by [`SHIFT_PX`] (moved back by
+/// it), in the units of the tolerances: the pose's worst landmark and its nose, shoulders and
+/// hips over our shoulder width (11–12), each hand's worst over its wrist–middle-knuckle
+/// length (0–9). How far the pipeline moves by itself, for an input change smaller than any
+/// difference between our crops and mediapipe's.
+#[derive(Default)]
+pub(crate) struct SelfShift {
+    pose: Vec<f64>,
+    core: Vec<f64>,
+    hands: Vec<f64>,
+}
+
+impl SelfShift {
+    /// Adds one frame: `ours` on the frame, `shifted` on the panned one.
+    pub(crate) fn add(&mut self, ours: &Landmarks, shifted: &Landmarks) {
+        let back = |l: &Landmark| [l.x + SHIFT_PX, l.y];
+        let worst_of = |a: &[Landmark], b: &[Landmark], idx: &mut dyn Iterator<Item = usize>| {
+            idx.map(|i| d(back(&a[i]), [b[i].x, b[i].y]))
+                .fold(0.0, f64::max)
+        };
+        if let (Some(a), Some(b)) = (&ours.pose, &shifted.pose) {
+            let shoulders = d(
+                [a.points[11].x, a.points[11].y],
+                [a.points[12].x, a.points[12].y],
+            );
+            self.pose
+                .push(worst_of(&a.points, &b.points, &mut (0..33)) / shoulders);
+            self.core.push(
+                worst_of(&a.points, &b.points, &mut [0, 11, 12, 23, 24].into_iter()) / shoulders,
+            );
+        }
+        for a in &ours.hands {
+            let wrist = back(&a.points[0]);
+            let length = d(
+                [a.points[0].x, a.points[0].y],
+                [a.points[9].x, a.points[9].y],
+            );
+            let nearest = shifted.hands.iter().min_by(|p, q| {
+                let dp = d([p.points[0].x, p.points[0].y], wrist);
+                let dq = d([q.points[0].x, q.points[0].y], wrist);
+                dp.total_cmp(&dq)
+            });
+            if let Some(b) = nearest.filter(|b| d([b.points[0].x, b.points[0].y], wrist) < length) {
+                self.hands
+                    .push(worst_of(&a.points, &b.points, &mut (0..21)) / length);
+            }
+        }
+    }
+
+    /// The pose worst, nose/shoulders/hips and hands series' statistics.
+    pub(crate) fn stats(&self) -> (Stats, Stats, Stats) {
+        (
+            Stats::of(&self.pose),
+            Stats::of(&self.core),
+            Stats::of(&self.hands),
+        )
     }
 }

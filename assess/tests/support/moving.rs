@@ -31,8 +31,14 @@ pub(crate) fn motion(k: usize) -> (f64, f64, f64) {
 
 /// Frame `k` made from `src`.
 pub(crate) fn frame(src: &RgbImage, k: usize) -> RgbImage {
+    frame_shifted(src, k, 0.0)
+}
+
+/// Frame `k` made from `src` with the photo panned `dx` [px] further right (the tests' measure
+/// of the models' own sensitivity, `compare::SHIFT_PX`).
+pub(crate) fn frame_shifted(src: &RgbImage, k: usize, dx: f64) -> RgbImage {
     let (pan, zoom, roll) = motion(k);
-    warp(src, 0.75 * zoom, [pan, 0.0], roll)
+    warp(src, 0.75 * zoom, [pan + dx, 0.0], roll)
 }
 
 /// `src` scaled by `scale` about its centre, rolled by `roll` [deg] (counter-clockwise on

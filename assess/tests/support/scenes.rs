@@ -121,8 +121,14 @@ impl Scene {
 
     /// Frame `k` made from `src` (the scene's [`Scene::photo`]).
     pub(crate) fn frame(self, src: &RgbImage, k: usize) -> RgbImage {
+        self.frame_shifted(src, k, 0.0)
+    }
+
+    /// Frame `k` with the photo panned `dx` [px] further right, the same sensor noise on the
+    /// same pixels (the tests' measure of the models' own sensitivity).
+    pub(crate) fn frame_shifted(self, src: &RgbImage, k: usize, dx: f64) -> RgbImage {
         let (scale, pan, roll) = self.motion(k);
-        let mut out = moving::warp(src, scale, pan, roll);
+        let mut out = moving::warp(src, scale, [pan[0] + dx, pan[1]], roll);
         if self == Scene::LowLight {
             let (gain, sigma) = LOW_LIGHT;
             let mut rng = SplitMix64(0x5eed_10e1_1647_0000 ^ k as u64);
