@@ -38,7 +38,7 @@ mod compare;
 #[path = "support/moving.rs"]
 mod moving;
 
-use compare::{SHIFT_PX, SelfShift, Stats, d, worst, xy};
+use compare::{SHIFT_PX, SelfShift, Stats, d, nearest_hand, worst, xy};
 
 #[test]
 fn tracking_on_moving_video_against_mediapipe_video_mode() {
@@ -94,15 +94,7 @@ fn tracking_on_moving_video_against_mediapipe_video_mode() {
         for h in rh {
             let h = h.as_array().unwrap();
             let wrist = xy(&h[0]);
-            let ours = lm
-                .hands
-                .iter()
-                .min_by(|a, b| {
-                    let da = d([a.points[0].x, a.points[0].y], wrist);
-                    let db = d([b.points[0].x, b.points[0].y], wrist);
-                    da.total_cmp(&db)
-                })
-                .unwrap();
+            let ours = nearest_hand(&lm.hands, wrist).unwrap();
             if k >= 1 {
                 hands.push(worst(&ours.points, h, 0..21) / d(wrist, xy(&h[9])));
             }
@@ -154,6 +146,8 @@ fn tracking_on_moving_video_against_mediapipe_video_mode() {
         "pose worst median {:.3}",
         pose.median
     );
+    // Bounded near the measured 10.5 % as before.
+    assert!(pose.median <= 0.12, "pose worst median {:.3}", pose.median);
     // Not yet met (issue: nose, shoulders, hips ≤ 5 % max): measured median 1.6 %, one frame
     // over 5 %.
     assert!(core.median <= 0.03, "core median {:.3}", core.median);

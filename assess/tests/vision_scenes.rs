@@ -34,7 +34,7 @@ mod moving;
 #[path = "support/scenes.rs"]
 mod scenes;
 
-use compare::{SHIFT_PX, SelfShift, Stats, d, worst, xy};
+use compare::{SHIFT_PX, SelfShift, Stats, d, nearest_hand, px, worst, xy};
 use scenes::Scene;
 
 /// What one scene measured.
@@ -115,8 +115,8 @@ fn measure(scene: Scene) -> Measured {
             hands_presence.push((k, lm.hands.len(), rh.len()));
         }
         for h in &lm.hands {
-            let wrist = [h.points[0].x, h.points[0].y];
-            let length = d(wrist, [h.points[9].x, h.points[9].y]);
+            let wrist = px(&h.points[0]);
+            let length = d(wrist, px(&h.points[9]));
             if !rh.iter().any(|q| d(xy(&q[0]), wrist) < length) {
                 unmatched_hands.push((k, wrist, length));
             }
@@ -129,12 +129,7 @@ fn measure(scene: Scene) -> Measured {
             let tracked = previous_hands
                 .iter()
                 .any(|q| d(xy(&q[0]), wrist) < 2.0 * length);
-            let ours = lm.hands.iter().min_by(|a, b| {
-                let da = d([a.points[0].x, a.points[0].y], wrist);
-                let db = d([b.points[0].x, b.points[0].y], wrist);
-                da.total_cmp(&db)
-            });
-            if let Some(ours) = ours.filter(|_| tracked) {
+            if let Some(ours) = nearest_hand(&lm.hands, wrist).filter(|_| tracked) {
                 hands.push(worst(&ours.points, h, 0..21) / length);
             }
         }

@@ -5,7 +5,7 @@
 
 use assess::vision::models::model_dir;
 use assess::vision::pipeline::{Mode, Pipeline, PipelineConfig};
-use assess::vision::{Landmark, Landmarks};
+use assess::vision::{HandLandmarks, Landmark, Landmarks};
 use serde_json::Value;
 
 /// Our pipeline in tracking mode (as mediapipe's video mode), default models.
@@ -28,6 +28,18 @@ pub(crate) fn xy(v: &Value) -> [f64; 2] {
 /// The distance between two points [px].
 pub(crate) fn d(a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - b[0]).hypot(a[1] - b[1])
+}
+
+/// A landmark's image position `[x, y]` [px].
+pub(crate) fn px(l: &Landmark) -> [f64; 2] {
+    [l.x, l.y]
+}
+
+/// The hand of `hands` whose wrist is nearest `wrist` [px].
+pub(crate) fn nearest_hand(hands: &[HandLandmarks], wrist: [f64; 2]) -> Option<&HandLandmarks> {
+    hands
+        .iter()
+        .min_by(|a, b| d(px(&a.points[0]), wrist).total_cmp(&d(px(&b.points[0]), wrist)))
 }
 
 /// The largest distance over `idx` between ours and the reference [px].
@@ -79,14 +91,10 @@ impl SelfShift {
     pub(crate) fn add(&mut self, ours: &Landmarks, shifted: &Landmarks) {
         let back = |l: &Landmark| [l.x + SHIFT_PX, l.y];
         let worst_of = |a: &[Landmark], b: &[Landmark], idx: &mut dyn Iterator<Item = usize>| {
-            idx.map(|i| d(back(&a[i]), [b[i].x, b[i].y]))
-                .fold(0.0, f64::max)
+            idx.map(|i| d(back(&a[i]), px(&b[i]))).fold(0.0, f64::max)
         };
         if let (Some(a), Some(b)) = (&ours.pose, &shifted.pose) {
-            let shoulders = d(
-                [a.points[11].x, a.points[11].y],
-                [a.points[12].x, a.points[12].y],
-            );
+            let shoulders = d(px(&a.points[11]), px(&a.points[12]));
             self.pose
                 .push(worst_of(&a.points, &b.points, &mut (0..33)) / shoulders);
             self.core.push(
@@ -95,16 +103,9 @@ impl SelfShift {
         }
         for a in &ours.hands {
             let wrist = back(&a.points[0]);
-            let length = d(
-                [a.points[0].x, a.points[0].y],
-                [a.points[9].x, a.points[9].y],
-            );
-            let nearest = shifted.hands.iter().min_by(|p, q| {
-                let dp = d([p.points[0].x, p.points[0].y], wrist);
-                let dq = d([q.points[0].x, q.points[0].y], wrist);
-                dp.total_cmp(&dq)
-            });
-            if let Some(b) = nearest.filter(|b| d([b.points[0].x, b.points[0].y], wrist) < length) {
+            let length = d(px(&a.points[0]), px(&a.points[9]));
+            let nearest = nearest_hand(&shifted.hands, wrist);
+            if let Some(b) = nearest.filter(|b| d(px(&b.points[0]), wrist) < length) {
                 self.hands
                     .push(worst_of(&a.points, &b.points, &mut (0..21)) / length);
             }
