@@ -618,6 +618,12 @@ impl SimBackend {
         &self.published
     }
 
+    /// The target of the servo command our program executes, as the client wrote it (before
+    /// the per-cycle extrapolation) [rad]; `None` while no servo command is in force.
+    pub fn servo_target(&self) -> Option<Joints> {
+        self.servo.as_ref().map(|s| s.q)
+    }
+
     /// Whether a control program runs: ours, or ur_rtde's control script.
     pub fn program_running(&self) -> bool {
         self.program.is_some() || self.ur_rtde.is_some()

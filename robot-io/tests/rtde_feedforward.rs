@@ -139,8 +139,13 @@ async fn an_unrefreshed_ramp_target_is_extrapolated_at_the_ramp_velocity_up_to_t
 /// (`robot_io::emulator::ClientWait`): after one moving servo target and then silence,
 /// virtual time stands still (cycles counted as waited, none run) for as long as the bound
 /// allows, here 30 s; a new command lets it run on. With a short bound (50 ms) it runs on
-/// after the bound, as a controller would, and counts the timed-out wait. Nothing depends on
-/// how fast this machine is: the long bound is never reached, the short one always is.
+/// after the bound, as a controller would, and counts the timed-out wait.
+///
+/// Nothing depends on how fast this machine is. Every snapshot is taken only after the
+/// emulator has put the ramp's last command in force (`SimBackend::servo_target`), so a command
+/// still in flight cannot end a wait the test is watching; each later condition is polled
+/// for, bounded by [`SAMPLE_TIMEOUT`], never slept for. The long bound is never reached, the
+/// short one always is.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_sped_up_clock_waits_for_a_late_client_and_runs_on_after_the_bound() {
     tokio::time::timeout(TEST_TIMEOUT, async {
@@ -155,54 +160,53 @@ async fn a_sped_up_clock_waits_for_a_late_client_and_runs_on_after_the_bound() {
                 ..EmulatorConfig::ephemeral()
             };
             let (emu, mut robot) = setup_with(cfg, map).await;
+            let in_force = |emu: &Emulator| emu.with_sim(|b| b.servo_target()).flatten();
             let mut s = RobotState::default();
             let (_, mut target) = send_ramp(&mut robot, &mut s, 0.25).await;
-            // With the short bound a stall of this test during the ramp may already have
-            // timed a wait out: the silence below must add one.
-            let timed_out_before = emu.clock_stats().waits_timed_out;
-            if !times_out {
-                assert_eq!(timed_out_before, 0);
-            }
-            // Silence: the clock begins to wait within a few cycles.
-            let mut waiting = emu.clock_stats();
-            for _ in 0..10_000 {
-                waiting = emu.clock_stats();
-                if waiting.waits > 0 && waiting.cycles_waited > 0 {
-                    break;
-                }
-                tokio::time::sleep(Duration::from_millis(1)).await;
-            }
+            // The ramp's last command is in force (a stalled test may have written two
+            // commands between cycles; the emulator then executes the newer only).
+            poll(|| in_force(&emu) == Some(target)).await;
+            let executed = emu.clock_stats();
+            // Silence: the clock waits at a wake after the last command's cycle.
+            poll(|| emu.clock_stats().cycles_waited > executed.cycles_waited).await;
+            let waiting = emu.clock_stats();
             assert!(waiting.waits > 0, "never waited: {waiting:?}");
-            tokio::time::sleep(Duration::from_millis(200)).await;
-            let later = emu.clock_stats();
             if times_out {
-                assert!(later.waits_timed_out > timed_out_before, "{later:?}");
-                assert!(later.cycles_run > waiting.cycles_run, "ran on: {later:?}");
+                // The wait started after `executed` reaches the bound; the clock runs on.
+                poll(|| emu.clock_stats().waits_timed_out > executed.waits_timed_out).await;
+                poll(|| emu.clock_stats().cycles_run > waiting.cycles_run).await;
             } else {
+                // While it waits, cycles are counted as waited and none runs.
+                poll(|| emu.clock_stats().cycles_waited > waiting.cycles_waited + 100).await;
+                let later = emu.clock_stats();
                 assert_eq!(later.waits_timed_out, 0, "{later:?}");
                 assert_eq!(
                     later.cycles_run, waiting.cycles_run,
-                    "a cycle ran while waiting"
+                    "a cycle ran while waiting: {later:?}"
                 );
-                assert!(later.cycles_waited > waiting.cycles_waited, "{later:?}");
+                assert_eq!(in_force(&emu), Some(target));
                 // The next command, for the cycle after the newest sample: the clock runs on.
                 robot.wait_state(&mut s, SAMPLE_TIMEOUT).await.unwrap();
                 target[0] += 0.0005;
                 robot.send(&servo(target)).unwrap();
-                let mut ran = later;
-                for _ in 0..10_000 {
-                    ran = emu.clock_stats();
-                    if ran.cycles_run > later.cycles_run {
-                        break;
-                    }
-                    tokio::time::sleep(Duration::from_millis(1)).await;
-                }
-                assert!(ran.cycles_run > later.cycles_run, "never ran on: {ran:?}");
+                poll(|| emu.clock_stats().cycles_run > later.cycles_run).await;
             }
         }
     })
     .await
     .expect("test timed out");
+}
+
+/// Polls `cond` every millisecond until it holds; panics after [`SAMPLE_TIMEOUT`].
+async fn poll(mut cond: impl FnMut() -> bool) {
+    let start = std::time::Instant::now();
+    while !cond() {
+        assert!(
+            start.elapsed() < SAMPLE_TIMEOUT,
+            "condition not met within {SAMPLE_TIMEOUT:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
 }
 
 /// A real-time clock (speedup 1) never waits: `wait_for_client` there is refused.
