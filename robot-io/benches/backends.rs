@@ -336,6 +336,9 @@ fn main() {
                 .push((cpu_of(&measured) - c0) as f64 / 1e6 / w0.elapsed().as_secs_f64());
         }
         report_cycles("ur_rtde (UrRtdeRobot, ur_rtde's control script)", &c);
+        // `send` hands over; ur_rtde's sender thread makes the call (counted above, as one of
+        // the threads ur_rtde's connect started). What it did with the commands:
+        println!("  ur_rtde sender thread: {:?}", robot.send_stats());
         drop(robot);
     }
     println!(

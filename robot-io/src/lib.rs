@@ -66,7 +66,7 @@ pub use rtde_robot::{RtdeRobot, RtdeRobotConfig};
 pub mod ur_rtde_robot;
 pub use script::{RegisterMap, ScriptSender};
 #[cfg(feature = "ur-rtde")]
-pub use ur_rtde_robot::{UrRtdeConfig, UrRtdeReceiver, UrRtdeRobot};
+pub use ur_rtde_robot::{UrRtdeConfig, UrRtdeReceiver, UrRtdeRobot, UrRtdeSendStats};
 
 // --- kinematics (UR5e FK and Jacobians; used by sim, adapt and safety) ---
 pub mod kinematics;

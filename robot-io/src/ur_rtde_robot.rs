@@ -16,26 +16,32 @@
 //! servo feedforward (the program extrapolates a late target) has no counterpart: a servoJ
 //! target reaches the robot as ur_rtde sends it.
 //!
-//! # Real-time contract: what holds and what does not
-//! - **Blocking.** [`Robot::read_state`] copies ur_rtde's latest sample (its receive thread
-//!   fills it; each getter takes that thread's state mutex for a copy). It never waits for a
-//!   new sample: without one it returns the previous state again (same `timestamp_s`), which
-//!   the supervisor's staleness check sees. [`Robot::send`] calls servoJ/speedJ, which write
-//!   the RTDE input package to the socket synchronously (a `write` of a few hundred bytes;
-//!   it blocks only when the socket buffer is full). A stop uses `stopJ(decel, asynchronous)`,
-//!   which does not wait for the arm to stop.
-//! - **Allocation.** ur_rtde's getters return `std::vector<double>` by value and build their
-//!   field name as a `std::string` each call (20–21 `malloc` calls per read, measured). The
-//!   shim does not use them: it reads ur_rtde's own state object (`robot_state()`, the
-//!   header-inline `getStateData`) with field names built once and into vectors of its own
-//!   that keep their storage, so **a `read_state` allocates nothing** (0 `malloc` calls over
-//!   1000 reads: `robot-io/ffi/tools/alloc_count.c`, a malloc-interposing program that
-//!   `scripts/test-ur-rtde` builds and runs against `hrc-adapt emulate --sim`, failing on any).
-//!   **`send` does allocate**: ur_rtde's servoJ builds its command and the RTDE input package
-//!   in vectors (31 `malloc` calls per servoJ, same program, reported and not judged), which
-//!   no shim can avoid without reimplementing ur_rtde's control interface. Rust's counting
-//!   allocator does not see C++ `malloc`; on the send side this backend does not meet the
-//!   crate's no-allocation rule, unlike [`crate::RtdeRobot`].
+//! # Real-time contract
+//! - **The sender thread.** ur_rtde's control calls block and allocate: servoJ and speedJ
+//!   wait (up to 3 s) for the script's "ready" on the last state received and write the RTDE
+//!   input package to the socket synchronously; stopJ waits for the script's "done"; and
+//!   servoJ builds its command and package in vectors (31 `malloc` calls per call, measured by
+//!   `robot-io/ffi/tools/alloc_count.c`), which no shim can avoid without reimplementing
+//!   ur_rtde's control interface. So [`UrRtdeRobot`] gives the control interface to a thread
+//!   of its own (`ur_rtde-send`). [`Robot::send`] writes the command into a triple buffer
+//!   (the newest command wins) and wakes that thread: it **never waits and allocates
+//!   nothing** on the caller's thread (`robot-io/tests/ur_rtde_backend.rs`,
+//!   `the_control_cycle_allocates_nothing_through_the_ur_rtde_backend`, a counting
+//!   allocator; no ur_rtde call is made there, so no C++ allocation either). The allocation
+//!   and the waits happen on the sender thread. What that costs is counted, never hidden
+//!   ([`UrRtdeSendStats`]): a command the thread had no time to take is `superseded`, a
+//!   failed call is reported by the next `send`, and a call still running after
+//!   [`UrRtdeConfig::call_stuck_after`] makes `send` report the link down.
+//! - **Reading.** [`Robot::read_state`] copies ur_rtde's latest sample (its receive thread
+//!   fills it; the copy takes that thread's state mutex briefly). It never waits for a new
+//!   sample: without one it returns the previous state again (same `timestamp_s`), which the
+//!   supervisor's staleness check sees. ur_rtde's getters return `std::vector<double>` by
+//!   value and build their field name as a `std::string` each call (20–21 `malloc` calls per
+//!   read, measured). The shim does not use them: it reads ur_rtde's own state object
+//!   (`robot_state()`, the header-inline `getStateData`) with field names built once and into
+//!   vectors of its own that keep their storage, so **a `read_state` allocates nothing** (0
+//!   `malloc` calls over 1000 reads: `alloc_count.c`, which `scripts/test-ur-rtde` builds and
+//!   runs against `hrc-adapt emulate --sim`, failing on any).
 //! - **Pacing.** [`UrRtdeRobot::init_period`] and [`UrRtdeRobot::wait_period`] are ur_rtde's
 //!   `initPeriod`/`waitPeriod` (a sleep then a spin to the end of the period given at
 //!   construction).
@@ -46,6 +52,10 @@ use std::borrow::Cow;
 use std::ffi::{CStr, CString, c_char, c_int};
 use std::marker::PhantomData;
 use std::ptr::NonNull;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, mpsc};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
 use crate::{JointCommand, Result, Robot, RobotIoError, RobotState};
 
@@ -129,7 +139,6 @@ mod ffi {
         pub(super) fn urs_control_init_period(h: *mut UrsControl, t_start_ns: *mut i64) -> c_int;
         pub(super) fn urs_control_wait_period(h: *mut UrsControl, t_start_ns: i64) -> c_int;
         pub(super) fn urs_control_is_connected(h: *mut UrsControl) -> c_int;
-        pub(super) fn urs_control_reconnect(h: *mut UrsControl) -> c_int;
         pub(super) fn urs_control_last_error(h: *const UrsControl) -> *const c_char;
     }
 }
@@ -144,6 +153,9 @@ pub struct UrRtdeConfig {
     /// Use the upper range of the input registers (42–47 instead of 18–23), as ur_rtde's
     /// `FLAG_UPPER_RANGE_REGISTERS`.
     pub upper_range_registers: bool,
+    /// A control call still running after this long makes [`Robot::send`] report the link
+    /// down ([`UrRtdeRobot`]'s sender thread) [s]; default 100 ms, 50 UR periods.
+    pub call_stuck_after: Duration,
 }
 
 impl UrRtdeConfig {
@@ -153,6 +165,7 @@ impl UrRtdeConfig {
             host: host.into(),
             frequency_hz: 500.0,
             upper_range_registers: false,
+            call_stuck_after: Duration::from_millis(100),
         }
     }
 
@@ -321,10 +334,6 @@ impl UrRtdeReceiver {
 // receive thread synchronises with any caller through its state mutex).
 unsafe impl Send for UrRtdeReceiver {}
 
-// SAFETY: as for UrRtdeReceiver: both handles are owned exclusively and used by one thread at a
-// time; ur_rtde's control interface has no thread affinity.
-unsafe impl Send for UrRtdeRobot {}
-
 impl Drop for UrRtdeReceiver {
     fn drop(&mut self) {
         // SAFETY: the handle came from urs_receive_new and is freed once, here.
@@ -335,18 +344,226 @@ impl Drop for UrRtdeReceiver {
 /// A UR arm through ur_rtde: [`UrRtdeReceiver`] for the state and ur_rtde's
 /// RTDEControlInterface (its own control script on the controller) for the commands.
 ///
-/// Owns both handles (freed on drop: the control script is stopped first); `Send`, `!Sync`.
+/// The control interface belongs to a sender thread of its own (see the module docs):
+/// [`Robot::send`] hands the command over and returns, and the sender thread makes the
+/// ur_rtde call. `Send`, `!Sync`. Dropping it stops the sender thread, which stops ur_rtde's
+/// control script and frees the interface.
 #[derive(Debug)]
 pub struct UrRtdeRobot {
     rx: UrRtdeReceiver,
+    /// The control interface, for the stateless `initPeriod`/`waitPeriod` only (every other
+    /// call is the sender thread's).
     ctl: NonNull<ffi::UrsControl>,
-    period_s: f64,
+    tx: SenderLink,
     _not_sync: PhantomData<std::cell::Cell<()>>,
+}
+
+// SAFETY: the receive handle is owned exclusively (as for UrRtdeReceiver). The control handle
+// is used on the owner's thread only for initPeriod/waitPeriod, which read nothing but the
+// period set at construction; every other use is the sender thread's. The handoff types are
+// Send.
+unsafe impl Send for UrRtdeRobot {}
+
+/// What the ur_rtde sender thread did with the commands handed to it ([`UrRtdeRobot::send_stats`]).
+///
+/// `handed == sent + failed + superseded + pending`, where `pending` (0 or 1) is a command
+/// handed and not yet taken, or in its call.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct UrRtdeSendStats {
+    /// Commands [`Robot::send`] handed to the sender thread [-].
+    pub handed: u64,
+    /// ur_rtde calls that succeeded [-].
+    pub sent: u64,
+    /// ur_rtde calls that failed (refused, threw, or the link was down) [-].
+    pub failed: u64,
+    /// Commands replaced by a newer one before the sender thread took them (it was still in
+    /// an earlier call): never sent [-].
+    pub superseded: u64,
+    /// The longest ur_rtde call so far [ns].
+    pub max_call_ns: u64,
+}
+
+/// The newest command for the sender thread, numbered from 1 (0: none yet).
+#[derive(Debug, Clone, Copy, Default)]
+struct Slot {
+    seq: u64,
+    cmd: Option<JointCommand>,
+}
+
+/// State the control thread and the sender thread share (atomics; the mutex only on the
+/// error path).
+#[derive(Debug, Default)]
+struct Shared {
+    stop: AtomicBool,
+    /// When the call in progress began [ns since the link's epoch, ≥ 1]; 0 while none runs.
+    call_began_ns: AtomicU64,
+    sent: AtomicU64,
+    failed: AtomicU64,
+    superseded: AtomicU64,
+    max_call_ns: AtomicU64,
+    /// The control interface's link, as the sender thread last saw it.
+    connected: AtomicBool,
+    /// A failure not yet reported by `send` (the first since the last report), and the flag
+    /// that says there is one; both changed under the mutex.
+    error: Mutex<Option<RobotIoError>>,
+    has_error: AtomicBool,
+}
+
+/// The control thread's end of the handoff.
+#[derive(Debug)]
+struct SenderLink {
+    input: triple_buffer::Input<Slot>,
+    shared: Arc<Shared>,
+    thread: Option<JoinHandle<()>>,
+    done: mpsc::Receiver<()>,
+    epoch: Instant,
+    seq: u64,
+    stuck_after_ns: u64,
+}
+
+/// The control handle as the sender thread owns it.
+struct CtlHandle(NonNull<ffi::UrsControl>);
+
+// SAFETY: the sender thread is the only user of the handle besides the stateless
+// initPeriod/waitPeriod (see UrRtdeRobot's Send); ur_rtde's control interface has no thread
+// affinity.
+unsafe impl Send for CtlHandle {}
+
+/// How long the sender thread sleeps while no command comes before it looks at the link
+/// again [s].
+const IDLE_CHECK: Duration = Duration::from_millis(20);
+
+/// How long dropping a [`UrRtdeRobot`] waits for the sender thread to finish its call and stop
+/// ur_rtde's script [s]; after that the thread is left to finish on its own (a warning says so).
+const DROP_WAIT: Duration = Duration::from_secs(2);
+
+/// Nanoseconds from `epoch` to now, at least 1 (0 means "no call") [ns].
+fn since_ns(epoch: Instant) -> u64 {
+    u64::try_from(epoch.elapsed().as_nanos())
+        .unwrap_or(u64::MAX)
+        .max(1)
+}
+
+/// Whether a call that began at `began_ns` (0: none runs) is stuck at `now_ns`, given the
+/// bound `stuck_after_ns` [ns].
+fn call_stuck(began_ns: u64, now_ns: u64, stuck_after_ns: u64) -> bool {
+    began_ns != 0 && now_ns.saturating_sub(began_ns) > stuck_after_ns
+}
+
+/// The error of a failed control call, built on the sender thread.
+fn control_error(ctl: *mut ffi::UrsControl, call: &'static str, status: c_int) -> RobotIoError {
+    if status == ffi::URS_DISCONNECTED {
+        return RobotIoError::LinkDown {
+            reason: Cow::Borrowed("ur_rtde's control interface is not connected"),
+        };
+    }
+    // SAFETY: the handle is live (the sender thread frees it only after its loop);
+    // last_error returns its NUL-terminated buffer, read before any other call on it.
+    let message = unsafe { message(ffi::urs_control_last_error(ctl)) };
+    RobotIoError::UrRtde {
+        call,
+        status,
+        message,
+    }
+}
+
+/// One ur_rtde call for `cmd`: servoJ or speedJ (time = one period), or stopJ (asynchronous).
+fn call(ctl: *mut ffi::UrsControl, cmd: &JointCommand, period_s: f64) -> Result<()> {
+    let (name, status) = match cmd {
+        JointCommand::Servo {
+            q,
+            lookahead_s,
+            gain,
+        } => (
+            "RTDEControlInterface::servoJ",
+            // SAFETY: the handle is live and used by this thread only (initPeriod/waitPeriod
+            // aside, which touch no state); `q` points at six f64, which the shim reads.
+            unsafe { ffi::urs_control_servo_j(ctl, q.as_ptr(), period_s, *lookahead_s, *gain) },
+        ),
+        JointCommand::Speed { qd, acc } => (
+            "RTDEControlInterface::speedJ",
+            // SAFETY: as above; `qd` points at six f64.
+            unsafe { ffi::urs_control_speed_j(ctl, qd.as_ptr(), *acc, period_s) },
+        ),
+        JointCommand::Stop { decel } => (
+            "RTDEControlInterface::stopJ",
+            // SAFETY: as above.
+            unsafe { ffi::urs_control_stop_j(ctl, *decel, 1) },
+        ),
+    };
+    if status == ffi::URS_OK {
+        Ok(())
+    } else {
+        Err(control_error(ctl, name, status))
+    }
+}
+
+/// The sender thread: takes the newest command, calls ur_rtde, counts and keeps the first
+/// unreported failure; at the end stops ur_rtde's script and frees the interface.
+fn sender_loop(
+    ctl: CtlHandle,
+    mut out: triple_buffer::Output<Slot>,
+    shared: Arc<Shared>,
+    epoch: Instant,
+    period_s: f64,
+    done: mpsc::SyncSender<()>,
+) {
+    let h = ctl.0.as_ptr();
+    let mut last_seq = 0_u64;
+    while !shared.stop.load(Ordering::Acquire) {
+        if !out.update() {
+            std::thread::park_timeout(IDLE_CHECK);
+            if !out.update() {
+                // SAFETY: the handle is live and used by this thread only.
+                let up = unsafe { ffi::urs_control_is_connected(h) == 1 };
+                shared.connected.store(up, Ordering::Release);
+                continue;
+            }
+        }
+        let slot = *out.output_buffer();
+        let Some(cmd) = slot.cmd.filter(|_| slot.seq > last_seq) else {
+            continue;
+        };
+        shared
+            .superseded
+            .fetch_add(slot.seq - last_seq - 1, Ordering::Relaxed);
+        last_seq = slot.seq;
+        let began = since_ns(epoch);
+        shared.call_began_ns.store(began, Ordering::Release);
+        let r = call(h, &cmd, period_s);
+        let took = since_ns(epoch).saturating_sub(began);
+        shared.call_began_ns.store(0, Ordering::Release);
+        shared.max_call_ns.fetch_max(took, Ordering::Relaxed);
+        match r {
+            Ok(()) => {
+                shared.sent.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(e) => {
+                shared.failed.fetch_add(1, Ordering::Relaxed);
+                let mut slot = shared
+                    .error
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner);
+                if slot.is_none() {
+                    *slot = Some(e);
+                    shared.has_error.store(true, Ordering::Release);
+                }
+            }
+        }
+        // SAFETY: as above.
+        let up = unsafe { ffi::urs_control_is_connected(h) == 1 };
+        shared.connected.store(up, Ordering::Release);
+    }
+    // SAFETY: the handle came from urs_control_new and is freed once, here (the shim stops
+    // ur_rtde's script first and catches what that throws); the owner no longer uses it.
+    unsafe { ffi::urs_control_free(h) };
+    let _ = done.send(());
 }
 
 impl UrRtdeRobot {
     /// Connects the receive interface, then the control interface (which uploads ur_rtde's
-    /// control script and waits for it to run: seconds, not for the control cycle).
+    /// control script and waits for it to run: seconds, not for the control cycle), and
+    /// starts the sender thread.
     pub fn connect(config: &UrRtdeConfig) -> Result<Self> {
         let rx = UrRtdeReceiver::connect(config)?;
         let host = config.checked()?;
@@ -364,36 +581,46 @@ impl UrRtdeRobot {
         };
         let ctl = NonNull::new(ctl)
             .ok_or_else(|| construct_error("RTDEControlInterface()", &config.host, &err))?;
+        let shared = Arc::new(Shared::default());
+        shared.connected.store(true, Ordering::Release);
+        let (input, out) = triple_buffer::triple_buffer(&Slot::default());
+        let (done_tx, done) = mpsc::sync_channel(1);
+        let epoch = Instant::now();
+        let period_s = config.period_s();
+        let worker = {
+            let shared = Arc::clone(&shared);
+            let handle = CtlHandle(ctl);
+            std::thread::Builder::new()
+                .name("ur_rtde-send".into())
+                .spawn(move || sender_loop(handle, out, shared, epoch, period_s, done_tx))
+        };
+        let thread = match worker {
+            Ok(t) => t,
+            Err(e) => {
+                // SAFETY: the thread did not start, so the handle is still ours alone.
+                unsafe { ffi::urs_control_free(ctl.as_ptr()) };
+                return Err(RobotIoError::UrRtde {
+                    call: "std::thread::spawn (ur_rtde sender)",
+                    status: -1,
+                    message: e.to_string(),
+                });
+            }
+        };
         Ok(Self {
             rx,
             ctl,
-            period_s: config.period_s(),
+            tx: SenderLink {
+                input,
+                shared,
+                thread: Some(thread),
+                done,
+                epoch,
+                seq: 0,
+                stuck_after_ns: u64::try_from(config.call_stuck_after.as_nanos())
+                    .unwrap_or(u64::MAX),
+            },
             _not_sync: PhantomData,
         })
-    }
-
-    fn error(&self, call: &'static str, status: c_int) -> RobotIoError {
-        if status == ffi::URS_DISCONNECTED {
-            return RobotIoError::LinkDown {
-                reason: Cow::Borrowed("ur_rtde's control interface is not connected"),
-            };
-        }
-        // SAFETY: the handle is live (owned by self); last_error returns its NUL-terminated
-        // buffer, read before any other call on it.
-        let message = unsafe { message(ffi::urs_control_last_error(self.ctl.as_ptr())) };
-        RobotIoError::UrRtde {
-            call,
-            status,
-            message,
-        }
-    }
-
-    fn status(&self, call: &'static str, status: c_int) -> Result<()> {
-        if status == ffi::URS_OK {
-            Ok(())
-        } else {
-            Err(self.error(call, status))
-        }
     }
 
     /// The receive side.
@@ -401,85 +628,153 @@ impl UrRtdeRobot {
         &mut self.rx
     }
 
+    /// What the sender thread did with the commands so far ([`UrRtdeSendStats`]).
+    pub fn send_stats(&self) -> UrRtdeSendStats {
+        let s = &self.tx.shared;
+        UrRtdeSendStats {
+            handed: self.tx.seq,
+            sent: s.sent.load(Ordering::Relaxed),
+            failed: s.failed.load(Ordering::Relaxed),
+            superseded: s.superseded.load(Ordering::Relaxed),
+            max_call_ns: s.max_call_ns.load(Ordering::Relaxed),
+        }
+    }
+
     /// ur_rtde's `initPeriod`: the start of a control cycle, as `steady_clock` time [ns].
     pub fn init_period(&mut self) -> Result<i64> {
         let mut t = 0_i64;
-        // SAFETY: the handle is live and used by this thread only; `t` is writable.
+        // SAFETY: the handle is live (the sender thread frees it only after this robot is
+        // dropped); initPeriod reads the clock and no state of the interface; `t` is writable.
         let status = unsafe { ffi::urs_control_init_period(self.ctl.as_ptr(), &mut t) };
-        self.status("RTDEControlInterface::initPeriod", status)?;
+        self.period_status("RTDEControlInterface::initPeriod", status)?;
         Ok(t)
     }
 
     /// ur_rtde's `waitPeriod`: waits until one period after `t_start_ns` (from
     /// [`UrRtdeRobot::init_period`]); returns at once when that is past.
     pub fn wait_period(&mut self, t_start_ns: i64) -> Result<()> {
-        // SAFETY: the handle is live and used by this thread only.
+        // SAFETY: as in init_period; waitPeriod reads only the period set at construction.
         let status = unsafe { ffi::urs_control_wait_period(self.ctl.as_ptr(), t_start_ns) };
-        self.status("RTDEControlInterface::waitPeriod", status)
+        self.period_status("RTDEControlInterface::waitPeriod", status)
     }
 
-    /// Whether both of ur_rtde's interfaces report their links up.
+    fn period_status(&self, call: &'static str, status: c_int) -> Result<()> {
+        if status == ffi::URS_OK {
+            Ok(())
+        } else {
+            Err(RobotIoError::UrRtde {
+                call,
+                status,
+                message: String::from("(initPeriod/waitPeriod failed)"),
+            })
+        }
+    }
+
+    /// Whether both of ur_rtde's interfaces report their links up (the control interface's
+    /// as the sender thread saw it after its last call, or within the last 20 ms when idle).
     pub fn is_connected(&mut self) -> bool {
-        // SAFETY: the handle is live and used by this thread only.
-        let ctl = unsafe { ffi::urs_control_is_connected(self.ctl.as_ptr()) == 1 };
-        ctl && self.rx.is_connected()
-    }
-
-    /// ur_rtde's `reconnect` of both interfaces (blocks for seconds; not for the control
-    /// cycle: the supervisor has stopped the trial when the link is lost).
-    pub fn reconnect(&mut self) -> Result<()> {
-        self.rx.reconnect()?;
-        // SAFETY: the handle is live and used by this thread only.
-        let status = unsafe { ffi::urs_control_reconnect(self.ctl.as_ptr()) };
-        self.status("RTDEControlInterface::reconnect", status)
+        self.tx.shared.connected.load(Ordering::Acquire) && self.rx.is_connected()
     }
 }
 
 impl Robot for UrRtdeRobot {
-    /// Copies ur_rtde's latest sample; never waits for a new one. Allocates on the C++ heap
-    /// (see the module docs). [`RobotIoError::LinkDown`] when ur_rtde reports the receive link
-    /// down.
+    /// Copies ur_rtde's latest sample; never waits for a new one; allocates nothing (see the
+    /// module docs). [`RobotIoError::LinkDown`] when ur_rtde reports the receive link down.
     fn read_state(&mut self, out: &mut RobotState) -> Result<()> {
         self.rx.read(out)
     }
 
-    /// servoJ (time = one period), speedJ (time = one period) or stopJ (asynchronous). Writes
-    /// to ur_rtde's socket synchronously; [`RobotIoError::UrRtde`] when ur_rtde refuses the
-    /// command or throws (the link is lost, the script stopped).
+    /// Hands `cmd` to the sender thread, which makes the ur_rtde call: servoJ (time = one
+    /// period), speedJ (time = one period) or stopJ (asynchronous). Never waits and allocates
+    /// nothing; a newer command replaces one the sender thread has not taken yet
+    /// ([`UrRtdeSendStats::superseded`]).
+    ///
+    /// Errors, without handing `cmd` over:
+    /// - a failure of an earlier call, once: [`RobotIoError::UrRtde`] when ur_rtde refused the
+    ///   command or threw, [`RobotIoError::LinkDown`] when its link was down;
+    /// - [`RobotIoError::LinkDown`] while a call has not returned for longer than
+    ///   [`UrRtdeConfig::call_stuck_after`] (ur_rtde waits on a silent link).
     fn send(&mut self, cmd: &JointCommand) -> Result<()> {
-        let ctl = self.ctl.as_ptr();
-        match cmd {
-            JointCommand::Servo {
-                q,
-                lookahead_s,
-                gain,
-            } => {
-                // SAFETY: the handle is live and used by this thread only; `q` points at six
-                // f64, which the shim reads.
-                let status = unsafe {
-                    ffi::urs_control_servo_j(ctl, q.as_ptr(), self.period_s, *lookahead_s, *gain)
-                };
-                self.status("RTDEControlInterface::servoJ", status)
-            }
-            JointCommand::Speed { qd, acc } => {
-                // SAFETY: as above, `qd` points at six f64.
-                let status =
-                    unsafe { ffi::urs_control_speed_j(ctl, qd.as_ptr(), *acc, self.period_s) };
-                self.status("RTDEControlInterface::speedJ", status)
-            }
-            JointCommand::Stop { decel } => {
-                // SAFETY: the handle is live and used by this thread only.
-                let status = unsafe { ffi::urs_control_stop_j(ctl, *decel, 1) };
-                self.status("RTDEControlInterface::stopJ", status)
+        let shared = &self.tx.shared;
+        if shared.has_error.load(Ordering::Acquire) {
+            // try_lock: the sender thread holds the mutex only to store an error; if it does
+            // now, the error is reported at the next send.
+            if let Ok(mut slot) = shared.error.try_lock() {
+                let e = slot.take();
+                shared.has_error.store(false, Ordering::Release);
+                if let Some(e) = e {
+                    return Err(e);
+                }
             }
         }
+        let began = shared.call_began_ns.load(Ordering::Acquire);
+        if call_stuck(began, since_ns(self.tx.epoch), self.tx.stuck_after_ns) {
+            return Err(RobotIoError::LinkDown {
+                reason: Cow::Borrowed(
+                    "a ur_rtde control call has not returned within call_stuck_after \
+                     (ur_rtde waits on a silent link)",
+                ),
+            });
+        }
+        self.tx.seq += 1;
+        self.tx.input.write(Slot {
+            seq: self.tx.seq,
+            cmd: Some(*cmd),
+        });
+        if let Some(t) = &self.tx.thread {
+            t.thread().unpark();
+        }
+        Ok(())
     }
 }
 
 impl Drop for UrRtdeRobot {
     fn drop(&mut self) {
-        // SAFETY: the handle came from urs_control_new and is freed once, here (the shim stops
-        // ur_rtde's script first and catches what that throws).
-        unsafe { ffi::urs_control_free(self.ctl.as_ptr()) }
+        self.tx.shared.stop.store(true, Ordering::Release);
+        let Some(thread) = self.tx.thread.take() else {
+            return;
+        };
+        thread.thread().unpark();
+        match self.tx.done.recv_timeout(DROP_WAIT) {
+            Ok(()) | Err(mpsc::RecvTimeoutError::Disconnected) => {
+                let _ = thread.join();
+            }
+            Err(mpsc::RecvTimeoutError::Timeout) => {
+                // ur_rtde is stuck in a call (a silent link); joining would block the owner.
+                tracing::warn!(
+                    "ur_rtde's sender thread is still in a call after {DROP_WAIT:?}; it stops \
+                     ur_rtde's script and frees the interface when that call returns"
+                );
+            }
+        }
+        let st = self.send_stats();
+        if st.failed > 0 || st.superseded > 0 {
+            tracing::info!(
+                "ur_rtde sender: {} commands handed, {} sent, {} failed, {} superseded, \
+                 longest call {:.3} ms",
+                st.handed,
+                st.sent,
+                st.failed,
+                st.superseded,
+                st.max_call_ns as f64 / 1e6
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_call_is_stuck_only_when_one_runs_beyond_the_bound() {
+        // No call runs (0): never stuck, however late.
+        assert!(!call_stuck(0, u64::MAX, 100));
+        // A call began at 1000 ns, bound 100 ns: stuck after 1100, not at it.
+        assert!(!call_stuck(1000, 1050, 100));
+        assert!(!call_stuck(1000, 1100, 100));
+        assert!(call_stuck(1000, 1101, 100));
+        // A clock read before the start (another thread's store raced ahead): not stuck.
+        assert!(!call_stuck(1000, 900, 100));
     }
 }

@@ -7,12 +7,16 @@
 use std::net::{IpAddr, Ipv4Addr};
 use std::time::{Duration, Instant};
 
+use hrc_adapt_tests::alloc_count::{CountingAllocator, allocations_in};
 use robot_io::emulator::{Emulator, EmulatorConfig, SimBackend};
 use robot_io::sim::{SimConfig, SimRobot};
 use robot_io::{
     JointCommand, Robot, RobotIoError, RobotState, UrRtdeConfig, UrRtdeReceiver, UrRtdeRobot,
     robot_mode, safety_mode,
 };
+
+#[global_allocator]
+static GLOBAL: CountingAllocator = CountingAllocator;
 
 /// Every wait is bounded by this.
 const WAIT: Duration = Duration::from_secs(20);
@@ -216,4 +220,115 @@ fn handles_are_send() {
     fn send<T: Send>() {}
     send::<UrRtdeReceiver>();
     send::<UrRtdeRobot>();
+}
+
+/// Polls `robot`'s send statistics until every command handed over is accounted for (sent,
+/// failed or superseded; none pending), or `WAIT` passes.
+fn settled(robot: &UrRtdeRobot) -> robot_io::UrRtdeSendStats {
+    let end = Instant::now() + WAIT;
+    loop {
+        let st = robot.send_stats();
+        if st.sent + st.failed + st.superseded == st.handed {
+            return st;
+        }
+        assert!(Instant::now() < end, "commands still pending: {st:?}");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+/// The control cycle's part of the ur_rtde backend, `read_state` and `send`, allocates nothing
+/// on the control thread (the counting allocator counts this thread only): `send` hands the
+/// command to the sender thread, which makes the ur_rtde call (and its 31 C++ allocations).
+/// 500 cycles of a servo ramp, paced by ur_rtde's initPeriod/waitPeriod (outside the counted
+/// closure); then every command handed over is accounted for, none failed, and the arm
+/// followed the ramp. Superseded commands (the sender thread had no time for them) are
+/// counted and printed, not judged: they depend on this machine's load.
+#[test]
+fn the_control_cycle_allocates_nothing_through_the_ur_rtde_backend() {
+    let rt = runtime();
+    let emu = emulator(&rt, 11);
+    let mut robot = UrRtdeRobot::connect(&UrRtdeConfig::new("127.0.0.11")).unwrap();
+    let mut s = RobotState::default();
+    robot.read_state(&mut s).unwrap();
+    let start = s.actual_q;
+    let mut target = start;
+    let mut allocations = 0;
+    for k in 0..500 {
+        let t = robot.init_period().unwrap();
+        target[0] = start[0] + 0.05 * f64::from(k) / 500.0;
+        let cmd = JointCommand::Servo {
+            q: target,
+            lookahead_s: 0.1,
+            gain: 300.0,
+        };
+        let (r, n) = allocations_in(|| {
+            let read = robot.read_state(&mut s);
+            (read, robot.send(&cmd))
+        });
+        r.0.unwrap();
+        r.1.unwrap();
+        allocations += n;
+        robot.wait_period(t).unwrap();
+    }
+    assert_eq!(allocations, 0, "allocations on the control thread");
+    let st = settled(&robot);
+    eprintln!("ur_rtde sender over 500 cycles: {st:?}");
+    assert_eq!(st.handed, 500);
+    assert_eq!(st.failed, 0, "{st:?}");
+    assert!(st.sent > 0, "{st:?}");
+    // The arm follows the ramp (its last target is 0.05 rad on).
+    let end = Instant::now() + WAIT;
+    loop {
+        robot.read_state(&mut s).unwrap();
+        if (s.actual_q[0] - target[0]).abs() < 1e-3 {
+            break;
+        }
+        assert!(Instant::now() < end, "the arm did not follow: {s:?}");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    assert!(s.actual_q[0] > start[0] + 0.04);
+    drop(robot);
+    emu.shutdown();
+}
+
+/// A ur_rtde call that fails on the sender thread is reported by the next `send` (once, as
+/// a structured error), and counted. Here the emulator goes away: the shim refuses commands
+/// on a link that is down, or ur_rtde throws on the closed socket.
+#[test]
+fn a_failed_ur_rtde_call_is_reported_by_the_next_send() {
+    let rt = runtime();
+    let emu = emulator(&rt, 12);
+    let mut robot = UrRtdeRobot::connect(&UrRtdeConfig::new("127.0.0.12")).unwrap();
+    let mut s = RobotState::default();
+    robot.read_state(&mut s).unwrap();
+    let hold = JointCommand::Servo {
+        q: s.actual_q,
+        lookahead_s: 0.1,
+        gain: 300.0,
+    };
+    robot.send(&hold).unwrap();
+    assert_eq!(settled(&robot).failed, 0);
+    emu.shutdown();
+    drop(emu);
+    drop(rt);
+    let end = Instant::now() + WAIT;
+    let err = loop {
+        match robot.send(&hold) {
+            Ok(()) => {
+                assert!(Instant::now() < end, "no failure reported in {WAIT:?}");
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            Err(e) => break e,
+        }
+    };
+    assert!(
+        matches!(
+            err,
+            RobotIoError::LinkDown { .. } | RobotIoError::UrRtde { .. }
+        ),
+        "{err}"
+    );
+    let st = settled(&robot);
+    assert!(st.failed >= 1, "{st:?}");
+    assert!(!robot.is_connected());
 }

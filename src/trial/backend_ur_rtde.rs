@@ -18,10 +18,13 @@
 //!   deceleration), nor after ur_rtde refused it (its script is not running, or the robot is
 //!   safety-stopped: the controller holds the arm), except when the link was down. Any other
 //!   command is sent every cycle.
-//! - A silent link (no new sample: a pulled cable, a stalled controller) must not block the
-//!   control cycle in ur_rtde, whose stopJ waits for the script's "done" on the last state
-//!   received for up to 300 s, and whose servoJ/speedJ wait up to 3 s for "ready" on it and
-//!   write to a socket whose peer may have stopped reading. So, by the age of the newest
+//! - A silent link (no new sample: a pulled cable, a stalled controller). ur_rtde's stopJ
+//!   waits for the script's "done" on the last state received for up to 300 s, and its
+//!   servoJ/speedJ wait up to 3 s for "ready" on it and write to a socket whose peer may have
+//!   stopped reading. Those waits happen on [`UrRtdeRobot`]'s sender thread, never in the
+//!   control cycle (its `send` only hands over), but a sender thread stuck in one would leave
+//!   every later command unsent until its `call_stuck_after` bound reports the link down. So
+//!   they are not entered at all on a silent link: by the age of the newest
 //!   sample: under [`STALE_AFTER`] a Stop is stopJ; from it on a Stop is speedJ to zero at the
 //!   same deceleration (it does not wait for "done"); from [`SILENT_AFTER`] on every command
 //!   is refused at once as [`robot_io::RobotIoError::LinkDown`] without calling ur_rtde (the
