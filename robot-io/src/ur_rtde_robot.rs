@@ -670,6 +670,21 @@ impl UrRtdeRobot {
         }
     }
 
+    /// The first failure of a ur_rtde call not yet reported, taken (so [`Robot::send`] does
+    /// not report it again). Never waits: if the sender thread is storing a failure right
+    /// now, it is reported at the next call. For a caller that skips `send` for a while
+    /// (the trial does not repeat an identical Stop) but must still learn of a failure.
+    pub fn take_failure(&mut self) -> Option<RobotIoError> {
+        let shared = &self.tx.shared;
+        if !shared.has_error.load(Ordering::Acquire) {
+            return None;
+        }
+        // try_lock: the sender thread holds the mutex only to store an error.
+        let mut slot = shared.error.try_lock().ok()?;
+        shared.has_error.store(false, Ordering::Release);
+        slot.take()
+    }
+
     /// Whether both of ur_rtde's interfaces report their links up (the control interface's
     /// as the sender thread saw it after its last call, or within the last 20 ms when idle).
     pub fn is_connected(&mut self) -> bool {
@@ -695,18 +710,10 @@ impl Robot for UrRtdeRobot {
     /// - [`RobotIoError::LinkDown`] while a call has not returned for longer than
     ///   [`UrRtdeConfig::call_stuck_after`] (ur_rtde waits on a silent link).
     fn send(&mut self, cmd: &JointCommand) -> Result<()> {
-        let shared = &self.tx.shared;
-        if shared.has_error.load(Ordering::Acquire) {
-            // try_lock: the sender thread holds the mutex only to store an error; if it does
-            // now, the error is reported at the next send.
-            if let Ok(mut slot) = shared.error.try_lock() {
-                let e = slot.take();
-                shared.has_error.store(false, Ordering::Release);
-                if let Some(e) = e {
-                    return Err(e);
-                }
-            }
+        if let Some(e) = self.take_failure() {
+            return Err(e);
         }
+        let shared = &self.tx.shared;
         let began = shared.call_began_ns.load(Ordering::Acquire);
         if call_stuck(began, since_ns(self.tx.epoch), self.tx.stuck_after_ns) {
             return Err(RobotIoError::LinkDown {

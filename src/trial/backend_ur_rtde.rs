@@ -30,8 +30,14 @@
 //!   is refused at once as [`robot_io::RobotIoError::LinkDown`] without calling ur_rtde (the
 //!   supervisor latches SAF-REQ-012; nothing reaches the robot then anyway).
 //!   Test: `sigstop_of_the_emulator_ends_the_ur_rtde_trial_as_link_lost_without_blocking`.
-//! - No program restart after a link loss ([`TrialRobot::restart_program`] is `false`):
-//!   ur_rtde's own reconnect re-uploads its script, which blocks for seconds.
+//! - No program restart after a link loss ([`TrialRobot::restart_program`] is `false`), and
+//!   no resume: `[link] resume = true` is refused. ur_rtde's own reconnect re-uploads its
+//!   script, which blocks for seconds; and 2.5 s into a silent link (its receive deadline)
+//!   ur_rtde 1.6.5's RTDEControlInterface reconnects by itself from its receive thread and,
+//!   with the controller still silent, crashes the process (SIGSEGV in
+//!   `RTDE::isDataAvailable` called from `RTDEControlInterface::receiveCallback`, seen under
+//!   gdb with a SIGSTOPped emulator, 2026-12-07). Without resume the trial ends at
+//!   `[link] lost_after_s` (1 s), before that.
 
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -127,7 +133,18 @@ impl Robot for PacedUrRtde {
     fn send(&mut self, cmd: &JointCommand) -> robot_io::Result<()> {
         let stop = matches!(cmd, JointCommand::Stop { .. });
         if stop && self.stopping.as_ref() == Some(cmd) {
-            return Ok(());
+            // Not sent again, but a failure of the one sent (reported by ur_rtde's sender
+            // thread after the call) still reaches the supervisor, and a Stop refused on a
+            // link that is down is sent again next cycle.
+            return match self.robot.take_failure() {
+                Some(e) => {
+                    if matches!(e, robot_io::RobotIoError::LinkDown { .. }) {
+                        self.stopping = None;
+                    }
+                    Err(e)
+                }
+                None => Ok(()),
+            };
         }
         // A Stop is remembered even when ur_rtde refuses it: it refuses when its script is
         // not running or the robot is safety-stopped, and then the controller holds the arm
@@ -229,12 +246,24 @@ pub(crate) fn start_emulator(
 }
 
 /// A real UR5e at `host` through ur_rtde, after the same dashboard checks and confirmation as
-/// the native backend ([`super::backend::check_and_confirm`]).
+/// the native backend ([`super::backend::check_and_confirm`]). Refused with `[link] resume =
+/// true` (see the module docs).
 pub(crate) fn connect_ur(
     host: &str,
     realtime: RealtimeConfig,
+    resume: bool,
     stop: &AtomicBool,
 ) -> crate::Result<(PacedUrRtde, RtdeGuard)> {
+    if resume {
+        return Err(crate::Error::Config {
+            field: "link.resume".into(),
+            reason: "= true is not supported with --robot-backend ur_rtde: ur_rtde 1.6.5's \
+                     control interface reconnects on its own 2.5 s into a silent link and \
+                     crashes the process there (SIGSEGV in RTDE::isDataAvailable); use resume \
+                     = false (the trial then ends as link_lost) or the native backend"
+                .into(),
+        });
+    }
     let (rt, _io) = rtde_runtime(realtime.rtde_io())?;
     super::backend::check_and_confirm(&rt, host, super::backend::UrPorts::default(), stop)?;
     let robot = connect(host, None, UR_PERIOD)?;

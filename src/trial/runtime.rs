@@ -600,8 +600,12 @@ pub(crate) fn run_trial_with_cues(
         }
         #[cfg(feature = "ur-rtde")]
         RobotChoice::UrRtde { host } => {
-            let (robot, guard) =
-                super::backend_ur_rtde::connect_ur(host, spec.config.realtime, stop)?;
+            let (robot, guard) = super::backend_ur_rtde::connect_ur(
+                host,
+                spec.config.realtime,
+                spec.config.link.resume,
+                stop,
+            )?;
             let out = drive(
                 spec,
                 setup,

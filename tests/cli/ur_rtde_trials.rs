@@ -249,3 +249,22 @@ fn sigstop_of_the_emulator_ends_the_ur_rtde_trial_as_link_lost_without_blocking(
         .unwrap();
     assert!(worst_us < 1e6, "a cycle blocked for {worst_us} us: {json}");
 }
+
+/// `[link] resume = true` with the ur_rtde backend on a robot address is refused before
+/// anything connects: ur_rtde 1.6.5 crashes the process 2.5 s into a silent link (its
+/// control interface's own reconnect; `src/trial/backend_ur_rtde.rs` module docs), so a
+/// resume could never happen. No emulator is needed: nothing is contacted.
+#[test]
+fn resume_with_the_ur_rtde_backend_is_refused_before_connecting() {
+    let _one = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let (child, _) = start_trial(dir.path(), true);
+    let (status, _, stderr) = common::wait(child);
+    assert!(!status.success(), "{stderr}");
+    assert!(stderr.contains("link.resume"), "{stderr}");
+    assert!(stderr.contains("ur_rtde"), "{stderr}");
+    assert!(
+        !stderr.contains("robot mode"),
+        "the dashboard was contacted: {stderr}"
+    );
+}
