@@ -20,6 +20,7 @@
 //! after each trial ([`session`]).
 
 pub(crate) mod aggregate;
+pub(crate) mod replicate;
 pub(crate) mod report;
 pub(crate) mod session;
 
@@ -49,6 +50,13 @@ pub struct ExperimentArgs {
     /// Trials run in parallel (default: the available cores), 1..=256 (one thread each).
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=256))]
     jobs: Option<usize>,
+    /// Run N seeded replications of the simulated experiment (2..=1000), each a whole
+    /// experiment in `rep-XX/`, and write a power table (`power.csv`, `power.md`): per metric
+    /// the distribution of the policy effect and the share of replications in which the
+    /// Wilcoxon test is significant at α = 0.05. Replication 1 uses the file's seed.
+    #[arg(long, conflicts_with = "participant", value_name = "N",
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(2..=1000))]
+    replicate: Option<usize>,
     /// Guide this participant's real session (their schedule rows, trial by trial, with
     /// prompts and NASA-TLX) instead of running the simulated experiment. An id of the
     /// schedule (`P01`, …; [A-Za-z0-9_-]{1,32}, as it names the session folder).
@@ -326,10 +334,39 @@ pub fn run(args: ExperimentArgs) -> crate::Result<()> {
         jobs >= 1,
         Error::usage("--jobs", "--jobs must be at least 1")
     );
+    let show = std::io::stderr().is_terminal();
+    if let Some(n) = args.replicate {
+        let wanted = args
+            .out_root
+            .join(format!("{}-replicate", crate::trial::wall_stamp()));
+        let out = replicate::run_replications(&args.config, &wanted, jobs, n, show)?;
+        eprintln!(
+            "[simulation] {n} replications: {} trials ({} failed); power table in {}",
+            out.trials,
+            out.failed,
+            out.dir.join("power.md").display()
+        );
+        for t in &out.table {
+            eprintln!(
+                "  {:<18} power {:.2} (Holm {:.2}), effect median {:.3}",
+                t.metric, t.power_raw, t.power_holm, t.effect[0]
+            );
+        }
+        println!("{}", out.dir.display());
+        ensure!(
+            out.failed == 0,
+            Error::ExperimentFailed {
+                failed: out.failed,
+                trials: out.trials,
+                report: out.dir.join("power.md"),
+                dir: out.dir,
+            }
+        );
+        return Ok(());
+    }
     let wanted = args
         .out_root
         .join(format!("{}-experiment", crate::trial::wall_stamp()));
-    let show = std::io::stderr().is_terminal();
     let out = run_experiment(&args.config, &wanted, jobs, show)?;
     eprintln!(
         "[simulation] {} trials ({} failed) in {:.1} s wall time on {jobs} worker(s)",
@@ -504,8 +541,22 @@ pub(crate) fn run_experiment(
     jobs: usize,
     show_progress: bool,
 ) -> crate::Result<ExperimentOutcome> {
+    run_experiment_seeded(config_path, wanted, jobs, show_progress, None)
+}
+
+/// [`run_experiment`] with the file's seed replaced by `seed` when given (a replication).
+pub(crate) fn run_experiment_seeded(
+    config_path: &Path,
+    wanted: &Path,
+    jobs: usize,
+    show_progress: bool,
+    seed: Option<u64>,
+) -> crate::Result<ExperimentOutcome> {
     let started = std::time::Instant::now();
-    let cfg = ExperimentConfig::from_file(config_path)?;
+    let mut cfg = ExperimentConfig::from_file(config_path)?;
+    if let Some(seed) = seed {
+        cfg.seed = seed;
+    }
     let trial_config = TrialConfig::from_file(&cfg.trial_config)?;
     let schedule = cfg.design().schedule().map_err(|e| {
         Error::from(e)

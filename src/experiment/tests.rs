@@ -392,3 +392,64 @@ fn a_real_session_runs_the_participants_schedule_rows() {
         .to_string();
     assert!(err.contains("P09 is not in the schedule"), "{err}");
 }
+
+/// `--replicate 2` on a tiny experiment: two whole experiments (replication 1 with the file's
+/// seed, replication 2 with another), then the power table, whose figures are recomputed here
+/// from `replications.csv` (the per-replication p-values) and from each replication's own
+/// `experiment_summary.json`.
+#[test]
+fn two_replications_write_every_experiment_and_a_consistent_power_table() {
+    let tmp = tempfile::tempdir().unwrap();
+    short_trial_config(tmp.path(), 15.0);
+    let cfg = tmp.path().join("ab.toml");
+    std::fs::write(
+        &cfg,
+        "participants = 2\nconditions = [\"L1\"]\npolicies = [\"adaptive\", \"fixed\"]\n\
+         seed = 11\ntrial_config = \"trial-short.toml\"\n",
+    )
+    .unwrap();
+    let out = replicate::run_replications(&cfg, &tmp.path().join("rep"), 2, 2, false).unwrap();
+    assert_eq!((out.trials, out.failed), (8, 0));
+    let summary = |r: usize| -> serde_json::Value {
+        let p = out.dir.join(format!("rep-{r:02}")).join("experiment_summary.json");
+        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    assert_eq!(summary(1)["design"]["seed"], 11);
+    assert_eq!(
+        summary(2)["design"]["seed"],
+        replicate::replication_seed(11, 2)
+    );
+    assert_ne!(replicate::replication_seed(11, 2), 11);
+
+    let reps = std::fs::read_to_string(out.dir.join("replications.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = reps.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 2 * aggregate::METRICS.len(), "{reps}");
+    for row in &rows {
+        // Each row's p-value is the one its replication's summary reports.
+        let r: usize = row[0].parse().unwrap();
+        let m = summary(r)["policy_comparison"]["metrics"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|m| m["metric"] == row[2])
+            .cloned()
+            .unwrap();
+        match m["p_value"].as_f64() {
+            Some(p) => assert_eq!(row[6].parse::<f64>().unwrap(), p, "{row:?}"),
+            None => assert_eq!(row[6], "", "{row:?}"),
+        }
+    }
+    let power = std::fs::read_to_string(out.dir.join("power.csv")).unwrap();
+    assert_eq!(power.lines().count(), 1 + aggregate::METRICS.len(), "{power}");
+    for t in &out.table {
+        let significant = rows
+            .iter()
+            .filter(|r| r[2] == t.metric)
+            .filter(|r| r[6].parse::<f64>().is_ok_and(|p| p < replicate::ALPHA))
+            .count();
+        assert_eq!(t.replications, 2);
+        assert_eq!(t.power_raw, significant as f64 / 2.0, "{t:?}");
+    }
+    let md = std::fs::read_to_string(out.dir.join("power.md")).unwrap();
+    assert!(md.contains("SIMULATED"), "{md}");
+}
