@@ -261,8 +261,7 @@ pub(crate) fn run_replications(
         trials += out.trials;
         failed += out.failed;
         let outcomes = aggregate::read_outcomes(&out.dir)?;
-        let tests =
-            aggregate::compare_policies(&outcomes, &cfg.policies[0], &cfg.policies[1])?;
+        let tests = aggregate::compare_policies(&outcomes, &cfg.policies[0], &cfg.policies[1])?;
         let mut row = [Effect {
             n_pairs: 0,
             median_difference: f64::NAN,

@@ -411,7 +411,10 @@ fn two_replications_write_every_experiment_and_a_consistent_power_table() {
     let out = replicate::run_replications(&cfg, &tmp.path().join("rep"), 2, 2, false).unwrap();
     assert_eq!((out.trials, out.failed), (8, 0));
     let summary = |r: usize| -> serde_json::Value {
-        let p = out.dir.join(format!("rep-{r:02}")).join("experiment_summary.json");
+        let p = out
+            .dir
+            .join(format!("rep-{r:02}"))
+            .join("experiment_summary.json");
         serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
     };
     assert_eq!(summary(1)["design"]["seed"], 11);
@@ -422,7 +425,11 @@ fn two_replications_write_every_experiment_and_a_consistent_power_table() {
     assert_ne!(replicate::replication_seed(11, 2), 11);
 
     let reps = std::fs::read_to_string(out.dir.join("replications.csv")).unwrap();
-    let rows: Vec<Vec<&str>> = reps.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let rows: Vec<Vec<&str>> = reps
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
     assert_eq!(rows.len(), 2 * aggregate::METRICS.len(), "{reps}");
     for row in &rows {
         // Each row's p-value is the one its replication's summary reports.
@@ -440,7 +447,11 @@ fn two_replications_write_every_experiment_and_a_consistent_power_table() {
         }
     }
     let power = std::fs::read_to_string(out.dir.join("power.csv")).unwrap();
-    assert_eq!(power.lines().count(), 1 + aggregate::METRICS.len(), "{power}");
+    assert_eq!(
+        power.lines().count(),
+        1 + aggregate::METRICS.len(),
+        "{power}"
+    );
     for t in &out.table {
         let significant = rows
             .iter()
