@@ -499,7 +499,8 @@ fn call(ctl: *mut ffi::UrsControl, cmd: &JointCommand, period_s: f64) -> Result<
 }
 
 /// The sender thread: takes the newest command, calls ur_rtde, counts and keeps the first
-/// unreported failure; at the end stops ur_rtde's script and frees the interface.
+/// unreported failure. Asked to stop, it still sends a command handed before, then stops
+/// ur_rtde's script and frees the interface.
 fn sender_loop(
     ctl: CtlHandle,
     mut out: triple_buffer::Output<Slot>,
@@ -510,8 +511,14 @@ fn sender_loop(
 ) {
     let h = ctl.0.as_ptr();
     let mut last_seq = 0_u64;
-    while !shared.stop.load(Ordering::Acquire) {
+    loop {
+        // Read before looking for a command: a command handed before the owner asked the
+        // thread to stop (its last Stop, typically) is still sent.
+        let stopping = shared.stop.load(Ordering::Acquire);
         if !out.update() {
+            if stopping {
+                break;
+            }
             std::thread::park_timeout(IDLE_CHECK);
             if !out.update() {
                 // SAFETY: the handle is live and used by this thread only.
