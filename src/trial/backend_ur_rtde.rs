@@ -118,8 +118,8 @@ impl SampleSource for Source<'_> {
 
 impl Robot for PacedUrRtde {
     /// As [`super::backend::PacedRtde`]: the newest sample if newer, else a bounded wait for
-    /// the next one. ur_rtde's read copies its receive thread's latest sample (and allocates
-    /// on the C++ heap: robot-io's `ur_rtde_robot` module docs).
+    /// the next one. ur_rtde's read copies its receive thread's latest sample and allocates
+    /// nothing (robot-io's `ur_rtde_robot` module docs).
     fn read_state(&mut self, out: &mut RobotState) -> robot_io::Result<()> {
         let wait = sample_wait(Instant::now(), self.last_fresh, self.period);
         let before = self.last_ts;
