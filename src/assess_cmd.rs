@@ -1517,6 +1517,9 @@ mod vision_tests {
     #[cfg(feature = "realsense")]
     #[test]
     fn a_bag_is_assessed_frame_by_frame_with_depth() {
+        let _one = crate::REALSENSE_PLAYBACK
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         let s = setup();
         let bag = root().join("data/bag/synthetic_plane.bag");
         let out = s.dir.path().join("results");

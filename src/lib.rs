@@ -92,6 +92,14 @@ mod vision_cmd;
 
 pub use error::{Error, Result};
 
+/// Held by every unit test that plays a RealSense `.bag`: two librealsense 2.56 playback
+/// devices in one process, one being destroyed while the other streams, crashed this test
+/// binary about once in 20 runs (SIGSEGV in `librealsense::playback_sensor::~playback_sensor`
+/// on a librealsense thread, seen under gdb, 2026-12-07). `hrc-adapt` opens one source per
+/// process; the tests serialise theirs.
+#[cfg(all(test, feature = "realsense"))]
+pub(crate) static REALSENSE_PLAYBACK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// The unit tests count the allocations of the control cycle (thread-local: only a counted
 /// section of the test's own thread; see `trial::control`'s tests).
 #[cfg(test)]

@@ -471,6 +471,9 @@ mod tests {
     #[cfg(feature = "realsense")]
     #[test]
     fn intrinsics_cannot_override_a_bags_own() {
+        let _one = crate::REALSENSE_PLAYBACK
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         let bag = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
             .join("data/bag/synthetic_plane.bag");
         let opened = open_source(&CueInput::Bag(bag), &CameraArgs::default(), None).unwrap();
