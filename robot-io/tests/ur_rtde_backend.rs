@@ -277,15 +277,9 @@ fn the_control_cycle_allocates_nothing_through_the_ur_rtde_backend() {
     assert_eq!(st.failed, 0, "{st:?}");
     assert!(st.sent > 0, "{st:?}");
     // The arm follows the ramp (its last target is 0.05 rad on).
-    let end = Instant::now() + WAIT;
-    loop {
-        robot.read_state(&mut s).unwrap();
-        if (s.actual_q[0] - target[0]).abs() < 1e-3 {
-            break;
-        }
-        assert!(Instant::now() < end, "the arm did not follow: {s:?}");
-        std::thread::sleep(Duration::from_millis(2));
-    }
+    let s = read_until(robot.receiver(), "the arm following the ramp", |s| {
+        (s.actual_q[0] - target[0]).abs() < 1e-3
+    });
     assert!(s.actual_q[0] > start[0] + 0.04);
     drop(robot);
     emu.shutdown();

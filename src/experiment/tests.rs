@@ -27,17 +27,28 @@ fn short_trial_config(dir: &Path, max_s: f64) -> PathBuf {
     path
 }
 
+/// Writes `dir/ab.toml`: a tiny A/B experiment of `participants` participants over
+/// `conditions` (e.g. `"\"L1\", \"L3\""`), adaptive against fixed, with `seed`, on
+/// `trial-short.toml` (see [`short_trial_config`]). Returns its path.
+fn tiny_experiment_config(dir: &Path, participants: usize, conditions: &str, seed: u64) -> PathBuf {
+    let cfg = dir.join("ab.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "participants = {participants}\nconditions = [{conditions}]\n\
+             policies = [\"adaptive\", \"fixed\"]\nseed = {seed}\n\
+             trial_config = \"trial-short.toml\"\n"
+        ),
+    )
+    .unwrap();
+    cfg
+}
+
 #[test]
 fn tiny_experiment_runs_end_to_end() {
     let tmp = tempfile::tempdir().unwrap();
     short_trial_config(tmp.path(), 20.0);
-    let cfg = tmp.path().join("ab.toml");
-    std::fs::write(
-        &cfg,
-        "participants = 2\nconditions = [\"L1\", \"L3\"]\npolicies = [\"adaptive\", \"fixed\"]\n\
-         seed = 11\ntrial_config = \"trial-short.toml\"\n",
-    )
-    .unwrap();
+    let cfg = tiny_experiment_config(tmp.path(), 2, "\"L1\", \"L3\"", 11);
     let dir = tmp.path().join("exp");
     let out = run_experiment(&cfg, &dir, 2, false).unwrap();
     assert_eq!((out.trials, out.failed), (8, 0));
@@ -140,13 +151,7 @@ fn an_experiment_whose_trials_failed_exits_non_zero_after_writing_its_report() {
     );
     assert!(text.contains("missing-workspace.toml"));
     std::fs::write(&trial_cfg, text).unwrap();
-    let cfg = tmp.path().join("ab.toml");
-    std::fs::write(
-        &cfg,
-        "participants = 1\nconditions = [\"L1\"]\npolicies = [\"adaptive\", \"fixed\"]\n\
-         seed = 1\ntrial_config = \"trial-short.toml\"\n",
-    )
-    .unwrap();
+    let cfg = tiny_experiment_config(tmp.path(), 1, "\"L1\"", 1);
     #[derive(clap::Parser)]
     struct Cli {
         #[command(flatten)]
@@ -401,13 +406,7 @@ fn a_real_session_runs_the_participants_schedule_rows() {
 fn two_replications_write_every_experiment_and_a_consistent_power_table() {
     let tmp = tempfile::tempdir().unwrap();
     short_trial_config(tmp.path(), 15.0);
-    let cfg = tmp.path().join("ab.toml");
-    std::fs::write(
-        &cfg,
-        "participants = 2\nconditions = [\"L1\"]\npolicies = [\"adaptive\", \"fixed\"]\n\
-         seed = 11\ntrial_config = \"trial-short.toml\"\n",
-    )
-    .unwrap();
+    let cfg = tiny_experiment_config(tmp.path(), 2, "\"L1\"", 11);
     let out = replicate::run_replications(&cfg, &tmp.path().join("rep"), 2, 2, false).unwrap();
     assert_eq!((out.trials, out.failed), (8, 0));
     let summary = |r: usize| -> serde_json::Value {
