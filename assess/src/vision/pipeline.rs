@@ -488,8 +488,10 @@ impl LandmarkModel {
 /// (sigmoid of the logits, HWC layout) peaks at ≥ `min_confidence` within a `kernel` × `kernel`
 /// window around it moves to the confidence-weighted mean of the window's cells. `raw` holds
 /// landmarks in input pixels, `values` per landmark; `input` is the input size [px].
-/// (MediaPipe's range check compares the column with the height a second time instead of the
-/// row; kept, since the heatmap is square.)
+/// A landmark outside the heatmap (column or row outside it) is kept as it is, as in
+/// refine_landmarks_from_heatmap_calculator.cc:126–129 at v0.10.21 (which checks the row
+/// against the height; ours compared the column a second time, so a landmark just below the
+/// crop was refined from the heatmap's last rows).
 pub fn refine_from_heatmap(
     raw: &mut [f32],
     values: usize,
@@ -514,7 +516,7 @@ pub fn refine_from_heatmap(
         let y = v[1] / input.1;
         let col = (x * hm_w as f32) as i64;
         let row = (y * hm_h as f32) as i64;
-        if col < 0 || col >= hm_w as i64 || row < 0 || col >= hm_h as i64 {
+        if col < 0 || col >= hm_w as i64 || row < 0 || row >= hm_h as i64 {
             continue;
         }
         let (c0, c1) = ((col - offset).max(0), (col + offset + 1).min(hm_w as i64));
@@ -961,6 +963,10 @@ impl Pipeline {
         self.times.pose_landmarks_us += micros(t);
         if flag < self.config.min_presence_score || raw.len() < 39 * 5 {
             self.pose_rect = None;
+            // MediaPipe resets its auxiliary-landmark filters here (a frame without landmarks,
+            // landmarks_smoothing_calculator.cc:56–60 at v0.10.21); doing so too was tried and
+            // reverted: it made the enter-leave scene worse (docs/calibration/
+            // mediapipe_graph_check.md).
             return Ok(None);
         }
         let all = self.pose_model.project(&raw, rect, size, true);
@@ -1689,5 +1695,56 @@ mod tests {
         // One wrist in the image, unseen: unknown, so the hand is kept.
         let (pose, hand) = pose_and_hand([320.0, 479.0], r, [0.1, 0.1], [320.0, 300.0]);
         assert!(belongs_to(&hand, &pose, SIZE));
+    }
+
+    /// MediaPipe's One-Euro filter (`util/filtering/one_euro_filter.cc` at v0.10.21) on a worked
+    /// example computed by hand: 30 Hz, object scale 100 px (value scale 0.01 /px), the aux
+    /// filter's min cutoff 0.01 Hz, β 10, derivative cutoff 1 Hz; values 200, 210, 210 px.
+    /// - frame 0: no previous raw value, so dvalue = 0 and the output is the input, 200;
+    /// - frame 1: dvalue = (210 − 200) · 0.01 · 30 = 3.0 /s; α_d = 1 / (1 + τ/Te) with
+    ///   τ = 1/(2π · 1) = 0.159155, Te = 1/30: α_d = 1 / 5.774648 = 0.173171; edvalue =
+    ///   0.173171 · 3 = 0.519512; cutoff = 0.01 + 10 · 0.519512 = 5.205122 Hz;
+    ///   α = 1 / (1 + 30 / (2π · 5.205122)) = 0.521567; out = 200 + 0.521567 · 10 = 205.2157;
+    /// - frame 2: dvalue = 0 (raw 210 again); edvalue = 0.826829 · 0.519512 = 0.429548;
+    ///   cutoff = 4.305479 Hz; α = 0.474165; out = 205.2157 + 0.474165 · (210 − 205.2157)
+    ///   = 207.4842.
+    ///
+    /// And a fresh filter (as mediapipe's after a reset on a frame without landmarks) passes
+    /// its first value unfiltered, where one with history pulls it back.
+    #[test]
+    fn mp_one_euro_matches_a_worked_example_and_a_fresh_filter_passes_its_first_value() {
+        let mut f = MpOneEuro::default();
+        let out: Vec<f64> = [200.0, 210.0, 210.0]
+            .iter()
+            .map(|&v| f.apply(v, 30.0, 0.01))
+            .collect();
+        assert!((out[0] - 200.0).abs() < 1e-9, "{out:?}");
+        assert!((out[1] - 205.2157).abs() < 1e-3, "{out:?}");
+        assert!((out[2] - 207.4842).abs() < 1e-3, "{out:?}");
+        // Without a reset, a jump to 400 px is still pulled back toward the old position...
+        let mut kept = f;
+        assert!(kept.apply(400.0, 30.0, 0.01) < 399.0);
+        // ...by a fresh one it is not.
+        let mut fresh = MpOneEuro::default();
+        assert_eq!(fresh.apply(400.0, 30.0, 0.01), 400.0);
+    }
+
+    /// The heatmap range check (refine_landmarks_from_heatmap_calculator.cc:123–129 at
+    /// v0.10.21), worked by hand: 64 × 64 heatmap, 256 × 256 input, one channel confident
+    /// (logit 10, sigmoid 0.99995) everywhere. A landmark at (128, 258) px has column
+    /// ⌊128/256 · 64⌋ = 32 and row ⌊258/256 · 64⌋ = 64 = the height: outside, kept as it is.
+    /// One at (128, 250) px (row 62) is inside: with kernel 7 (offset 3) its window is rows
+    /// 59–63 (clipped at 63) and columns 29–35, so with equal weights it moves to column mean
+    /// 32 → 32/64 · 256 = 128 px and row mean (59+…+63)/5 = 61 → 61/64 · 256 = 244 px.
+    #[test]
+    fn heatmap_refinement_leaves_landmarks_below_the_heatmap_alone() {
+        let heatmap = vec![10.0f32; 64 * 64];
+        let mut below = vec![128.0f32, 258.0, 0.0];
+        refine_from_heatmap(&mut below, 3, (256.0, 256.0), &heatmap, (64, 64), 7, 0.5);
+        assert_eq!(below, [128.0, 258.0, 0.0]);
+        let mut inside = vec![128.0f32, 250.0, 0.0];
+        refine_from_heatmap(&mut inside, 3, (256.0, 256.0), &heatmap, (64, 64), 7, 0.5);
+        assert!((inside[0] - 128.0).abs() < 1e-3, "{inside:?}");
+        assert!((inside[1] - 244.0).abs() < 1e-3, "{inside:?}");
     }
 }
