@@ -155,6 +155,9 @@ pub struct MotionAdaptation {
     pub wait_for_attention: bool,
     /// The operator's attention is on the robot now (from the assessment).
     pub attention_on_robot: bool,
+    /// Present the part this long before returning it (`None`: the task config's
+    /// `present_timeout_s`); taken when a presentation starts.
+    pub present_timeout: Option<Duration>,
 }
 
 impl Default for MotionAdaptation {
@@ -167,6 +170,7 @@ impl Default for MotionAdaptation {
             min_approach_duration: Duration::ZERO,
             wait_for_attention: false,
             attention_on_robot: true,
+            present_timeout: None,
         }
     }
 }
@@ -840,6 +844,7 @@ impl Controller {
             wait_for_attention: adaptation.wait_for_attention,
             attention_on_robot: adaptation.attention_on_robot,
             start_delay_s: adaptation.start_delay.as_secs_f64(),
+            present_timeout_s: adaptation.present_timeout.map(|d| d.as_secs_f64()),
         };
         self.task.step(&input, &mut self.events);
 

@@ -16,7 +16,8 @@
 //! - **Approach**: move to the handover pose in front of the operator.
 //! - **Present**: hold the part at the handover pose. The operator's grasp is detected when a hand
 //!   stays within `grasp_radius_m` (r_grasp) of the TCP for `grasp_time_s` (t_grasp) without a
-//!   break; a hand passing by briefly does not count. After `present_timeout_s` without a grasp
+//!   break; a hand passing by briefly does not count. After the present timeout (the input's
+//!   `present_timeout_s` when the presentation starts, else the config's) without a grasp
 //!   the robot gives up and returns the part: Present → Retreat, with a
 //!   [`TaskEventKind::PresentTimeout`] event, and the retreat goes back to the pick pose.
 //! - **Release**: the gripper opens; the release is confirmed after `release_dwell_s`.
@@ -496,6 +497,10 @@ pub struct TaskInput {
     /// Hold this long after the part is gripped before the handover starts [s] (≥ 0; a
     /// non-finite or negative value counts as 0).
     pub start_delay_s: f64,
+    /// Present this long before returning the part [s], read when the presentation starts;
+    /// `None`, or a value that is not finite or not above `grasp_time_s` (no grasp could be
+    /// detected in it): the config's `present_timeout_s`.
+    pub present_timeout_s: Option<f64>,
 }
 
 impl TaskInput {
@@ -510,6 +515,7 @@ impl TaskInput {
             wait_for_attention: false,
             attention_on_robot: false,
             start_delay_s: 0.0,
+            present_timeout_s: None,
         }
     }
 }
@@ -530,6 +536,8 @@ pub struct HandoverTask {
     hand_near_since_s: [Option<f64>; 2],
     release_confirmed: bool,
     returned: bool,
+    /// The present timeout of the current presentation [s], fixed when it starts.
+    present_timeout_s: f64,
 }
 
 impl HandoverTask {
@@ -546,6 +554,7 @@ impl HandoverTask {
             hand_near_since_s: [None, None],
             release_confirmed: false,
             returned: false,
+            present_timeout_s: cfg.present_timeout_s,
         }
     }
 
@@ -651,13 +660,20 @@ impl HandoverTask {
             Phase::WaitForAttention => {
                 (!input.wait_for_attention || input.attention_on_robot).then_some(Phase::Approach)
             }
-            Phase::Approach => input.motion_finished.then_some(Phase::Present),
+            Phase::Approach => {
+                let grasp = self.cfg.grasp_time_s;
+                let t = input
+                    .present_timeout_s
+                    .filter(|t| t.is_finite() && *t > grasp);
+                self.present_timeout_s = t.unwrap_or(self.cfg.present_timeout_s);
+                input.motion_finished.then_some(Phase::Present)
+            }
             Phase::Present => {
                 let grasp = self.update_grasp(input);
                 if let Some(hand) = grasp {
                     emit(TaskEventKind::GraspDetected { hand });
                     Some(Phase::Release)
-                } else if in_phase >= self.cfg.present_timeout_s {
+                } else if in_phase >= self.present_timeout_s {
                     emit(TaskEventKind::PresentTimeout);
                     self.returned = true;
                     Some(Phase::Retreat)

@@ -23,6 +23,7 @@ struct World {
     wait_for_attention: bool,
     attention: bool,
     start_delay_s: f64,
+    present_timeout_s: Option<f64>,
     hands: [Option<[f64; 3]>; 2],
     /// Phases seen, in order, without repeats.
     trace: Vec<Phase>,
@@ -44,6 +45,7 @@ impl World {
             wait_for_attention: false,
             attention: false,
             start_delay_s: 0.0,
+            present_timeout_s: None,
             hands: [None, None],
         }
     }
@@ -62,6 +64,7 @@ impl World {
             wait_for_attention: self.wait_for_attention,
             attention_on_robot: self.attention,
             start_delay_s: self.start_delay_s,
+            present_timeout_s: self.present_timeout_s,
         };
         self.task.step(&input, &mut self.events);
         if self.trace.last() != Some(&self.task.phase()) {
@@ -190,6 +193,42 @@ fn timeout_returns_the_part_without_release() {
         "G(t) stays true: the release never happened"
     );
     assert!(!w.kinds().contains(&TaskEventKind::ReleaseConfirmed));
+}
+
+#[test]
+fn the_adaptations_present_timeout_is_taken_when_the_presentation_starts() {
+    let c = cfg();
+    // 3 s instead of the config's: the part goes back 3 s after it is presented, and a change
+    // during the presentation does not move that time.
+    let mut w = World::new(c);
+    w.present_timeout_s = Some(3.0);
+    w.task.start();
+    w.run_until(Phase::Present, 10.0);
+    let present_at = w.now - DT;
+    w.present_timeout_s = Some(100.0);
+    w.run_until(Phase::Retreat, 4.0);
+    let t = w.event_time(TaskEventKind::PresentTimeout);
+    assert!(
+        (t - present_at - 3.0).abs() < 2.0 * DT,
+        "{}",
+        t - present_at
+    );
+    assert!(w.task.part_returned());
+    // A timeout no grasp fits in (not above grasp_time_s), or not finite: the config's.
+    for bad in [c.grasp_time_s, 0.0, f64::NAN, f64::INFINITY] {
+        let mut w = World::new(c);
+        w.present_timeout_s = Some(bad);
+        w.task.start();
+        w.run_until(Phase::Present, 10.0);
+        let present_at = w.now - DT;
+        w.run_until(Phase::Retreat, c.present_timeout_s + 1.0);
+        let t = w.event_time(TaskEventKind::PresentTimeout);
+        assert!(
+            (t - present_at - c.present_timeout_s).abs() < 2.0 * DT,
+            "{bad}: {}",
+            t - present_at
+        );
+    }
 }
 
 #[test]

@@ -145,6 +145,10 @@ pub struct HandoverTiming {
     /// Defer the approach while the operator's assembly dwell lasts, for at most this long per
     /// handover \[s\], in [0, [`MAX_TIMING_S`]]; 0 disables the deferral.
     pub max_assembly_deferral_s: f64,
+    /// Hold the part at the handover pose this long for the operator's grasp before returning
+    /// it \[s\], in (0, [`MAX_TIMING_S`]]; `None`: the handover task's own `present_timeout_s`
+    /// (`config/handover.toml`). Read when the presentation starts.
+    pub present_timeout_s: Option<f64>,
 }
 
 impl HandoverTiming {
@@ -156,16 +160,30 @@ impl HandoverTiming {
         present_requires_collaboration_attention: false,
         hold_while_in_instruction_area: false,
         max_assembly_deferral_s: 0.0,
+        present_timeout_s: None,
     };
 
-    /// The discrete part (flags and the deferral limit), which changes only when the active
-    /// rule changes.
-    pub fn gating(&self) -> (bool, bool, bool, f64) {
+    /// These timings without the gates that watch the operator (attention, instruction area,
+    /// assembly deferral): what a policy that does not look at the operator can use.
+    pub fn without_gates(self) -> HandoverTiming {
+        HandoverTiming {
+            wait_for_attention: false,
+            present_requires_collaboration_attention: false,
+            hold_while_in_instruction_area: false,
+            max_assembly_deferral_s: 0.0,
+            ..self
+        }
+    }
+
+    /// The discrete part (flags, the deferral limit and the present timeout), which changes
+    /// only when the active rule changes.
+    pub fn gating(&self) -> (bool, bool, bool, f64, Option<f64>) {
         (
             self.wait_for_attention,
             self.present_requires_collaboration_attention,
             self.hold_while_in_instruction_area,
             self.max_assembly_deferral_s,
+            self.present_timeout_s,
         )
     }
 

@@ -18,7 +18,8 @@
 //! The six rules `none`, `AED`, `TID`, `ICD`, `ASD_ctx` and `OHD` must all be present; unknown
 //! keys are errors that name the key. Fields: `rationale` (required, non-empty), `speed_scale`,
 //! `acceleration_scale`, `jerk_scale` (in (0, 1]), `start_delay_s`, `min_approach_duration_s`,
-//! `max_assembly_deferral_s` (in [0, [`MAX_TIMING_S`]] = [0, 600] s), and the flags
+//! `max_assembly_deferral_s` (in [0, [`MAX_TIMING_S`]] = [0, 600] s), `present_timeout_s` (in
+//! (0, 600] s; not given anywhere: the handover task's own), and the flags
 //! `wait_for_attention`, `present_requires_collaboration_attention`,
 //! `hold_while_in_instruction_area`. The meaning of each is on [`HandoverTiming`].
 //!
@@ -216,6 +217,7 @@ struct RawRule {
     present_requires_collaboration_attention: Option<bool>,
     hold_while_in_instruction_area: Option<bool>,
     max_assembly_deferral_s: Option<f64>,
+    present_timeout_s: Option<f64>,
 }
 
 impl RawRule {
@@ -265,6 +267,17 @@ impl RawRule {
                     self.max_assembly_deferral_s,
                     b.max_assembly_deferral_s,
                 )?,
+                present_timeout_s: match self.present_timeout_s {
+                    Some(x) if x > 0.0 && x <= MAX_TIMING_S => Some(x),
+                    Some(x) => {
+                        return Err(PolicyError::invalid(
+                            k("present_timeout_s"),
+                            "must be in (0, 600] s",
+                            x,
+                        ));
+                    }
+                    None => b.present_timeout_s,
+                },
             },
         })
     }
@@ -584,6 +597,29 @@ mod tests {
                 assert!(e.contains(&format!("`rules.none.{field}`")), "{e}");
                 assert!(e.contains("600"), "{e}");
             }
+        }
+    }
+
+    #[test]
+    fn the_present_timeout_is_inherited_bounded_and_optional() {
+        let t = |f: &str| RuleTable::from_toml_str(&table_with(f));
+        // Not given: the task's own (None), in every rule.
+        let none = t("").unwrap();
+        assert_eq!(none.rule(None).adaptation().timing.present_timeout_s, None);
+        // Given in rules.none: inherited by the other rules.
+        let given = t("present_timeout_s = 12.5\n").unwrap();
+        for k in Indicator::ALL {
+            assert_eq!(
+                given.rule(Some(k)).adaptation().timing.present_timeout_s,
+                Some(12.5)
+            );
+        }
+        assert!(t("present_timeout_s = 600.0\n").is_ok());
+        for bad in ["0.0", "-1.0", "600.5", "nan"] {
+            let e = t(&format!("present_timeout_s = {bad}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("`rules.none.present_timeout_s`"), "{bad}: {e}");
         }
     }
 }

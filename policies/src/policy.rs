@@ -28,7 +28,7 @@ pub trait Policy: fmt::Debug {
 /// [`FixedPolicy::default`] is [`Adaptation::NOMINAL`] (speed, acceleration and jerk scale 1,
 /// no delays, no gating). For an A/B comparison in which the two policies differ *only* by the
 /// adaptation, build it with [`FixedPolicy::from_table`], which uses the adaptive table's
-/// `none` rule.
+/// `none` rule without its gates on the operator's state.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FixedPolicy {
     output: Adaptation,
@@ -49,9 +49,14 @@ impl FixedPolicy {
         }
     }
 
-    /// The `none` rule of an adaptive rule table, held fixed.
+    /// The `none` rule of an adaptive rule table, held fixed, without its gates on the
+    /// operator's state ([`crate::HandoverTiming::without_gates`]): a fixed policy does not
+    /// watch the operator, so it shares the nominal rule's speeds, smoothness, delays and
+    /// present timeout, and starts each handover on the trial's schedule alone.
     pub fn from_table(table: &RuleTable) -> FixedPolicy {
-        FixedPolicy::new(table.rule(None).adaptation())
+        let mut a = table.rule(None).adaptation();
+        a.timing = a.timing.without_gates();
+        FixedPolicy::new(a)
     }
 
     /// The adaptation it returns.
@@ -99,8 +104,8 @@ impl PolicyKind {
         }
     }
 
-    /// Builds the policy. `fixed` uses the table's `none` rule ([`FixedPolicy::from_table`]), so
-    /// that fixed and adaptive share one nominal.
+    /// Builds the policy. `fixed` uses the table's `none` rule ([`FixedPolicy::from_table`],
+    /// without its gates on the operator), so that fixed and adaptive share one nominal motion.
     pub fn build(self, table: &RuleTable) -> Box<dyn Policy + Send> {
         match self {
             PolicyKind::Fixed => Box::new(FixedPolicy::from_table(table)),

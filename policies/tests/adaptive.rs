@@ -5,8 +5,8 @@ mod common;
 use assess::Indicator;
 use common::{assessment, only};
 use policies::{
-    Adaptation, AdaptivePolicy, FixedPolicy, HoldReason, Limits, Policy, PolicyKind, RuleTable,
-    TaskContext, TaskPhase,
+    Adaptation, AdaptivePolicy, FixedPolicy, Gate, HoldReason, Limits, Policy, PolicyKind,
+    RuleTable, TaskContext, TaskPhase,
 };
 
 fn ctx(t: f64) -> TaskContext {
@@ -44,13 +44,18 @@ fn the_shipped_table_moves_each_parameter_the_way_its_rule_says() {
     for r in table.rules() {
         assert!(!r.rationale().is_empty(), "{}", r.key());
     }
-    // OHD: slower, smoother, longer approach, wait for attention.
+    // OHD: slower, smoother, longer approach, a longer hold before the part is returned.
     let ohd = rule(Indicator::Ohd);
     assert!(ohd.speed_scale < none.speed_scale);
     assert!(ohd.acceleration_scale < none.acceleration_scale);
     assert!(ohd.jerk_scale < none.jerk_scale);
     assert!(ohd.timing.min_approach_duration_s > none.timing.min_approach_duration_s);
-    assert!(ohd.timing.wait_for_attention && !none.timing.wait_for_attention);
+    assert!(ohd.timing.present_timeout_s > none.timing.present_timeout_s);
+    assert_eq!(none.timing.present_timeout_s, None, "the task's own");
+    // Every rule presents only once the operator looks for the part (inherited from none).
+    for r in table.rules() {
+        assert!(r.adaptation().timing.wait_for_attention, "{}", r.key());
+    }
     // ASD_ctx: the two gating flags.
     let asd = rule(Indicator::AsdCtx);
     assert!(asd.timing.present_requires_collaboration_attention);
@@ -84,6 +89,13 @@ fn fixed_ignores_the_assessment() {
     );
     assert_eq!(out.speed_scale, table.rule(None).adaptation().speed_scale);
     assert_eq!(out.reason.indicator, None);
+    // ... without its gates on the operator: the shipped nominal waits for attention, the fixed
+    // policy never does (the gate is clear whatever the operator's area).
+    let nominal = table.rule(None).adaptation();
+    assert!(nominal.timing.wait_for_attention);
+    assert!(!out.timing.gates_start());
+    assert_eq!(out.gate, Gate::CLEAR);
+    assert_eq!(out.timing.start_delay_s, nominal.timing.start_delay_s);
     assert_eq!(
         "adaptive".parse::<PolicyKind>().unwrap(),
         PolicyKind::Adaptive
@@ -182,9 +194,18 @@ fn a_dominant_that_flips_every_frame_changes_the_rule_at_most_once_per_hold() {
     assert!((1..=15).contains(&p.changes()), "{}", p.changes());
 }
 
+/// The shipped table without its nominal attention gate, which every rule inherits and which
+/// would hold the start before any of the gates below is reached.
+fn shipped_without_the_attention_gate() -> AdaptivePolicy {
+    let toml =
+        policies::SHIPPED_TOML.replace("wait_for_attention = true", "wait_for_attention = false");
+    assert_ne!(toml, policies::SHIPPED_TOML);
+    AdaptivePolicy::new(RuleTable::from_toml_str(&toml).unwrap())
+}
+
 #[test]
 fn asd_gates_the_start_on_the_confirmed_area() {
-    let mut p = AdaptivePolicy::shipped();
+    let mut p = shipped_without_the_attention_gate();
     let asd = Some(Indicator::AsdCtx);
     let (_, t) = run(&mut p, 0.0, 9.0, asd, only(Indicator::AsdCtx, 0.1), ctx);
     let mut c = ctx(t);
@@ -208,7 +229,7 @@ fn asd_gates_the_start_on_the_confirmed_area() {
 
 #[test]
 fn aed_defers_the_start_during_the_dwell_up_to_the_limit() {
-    let mut p = AdaptivePolicy::shipped();
+    let mut p = shipped_without_the_attention_gate();
     let aed = Some(Indicator::Aed);
     let e = only(Indicator::Aed, 0.1);
     let (_, t0) = run(&mut p, 0.0, 9.0, aed, e, ctx);

@@ -36,6 +36,11 @@ pub struct TrialConfig {
     pub max_duration_s: f64,
     /// The robot starts fetching part k this long before the operator's nominal need [s].
     pub lead_time_s: f64,
+    /// When the policy holds the approach until the operator is ready (a start gate), the robot
+    /// fetches this much earlier still and waits with the part at the staging pose [s]; 0
+    /// without the key.
+    #[serde(default)]
+    pub staged_lead_s: f64,
     /// Log every 500 Hz robot state (and separation sample) instead of decimating to 100 Hz.
     #[serde(default)]
     pub robot_full_rate: bool,
@@ -272,6 +277,16 @@ impl TrialConfig {
             )
         );
         ensure!(
+            (0.0..=MAX_LEAD_TIME_S).contains(&cfg.staged_lead_s),
+            Error::config(
+                "staged_lead_s",
+                format!(
+                    "must be in [0, {MAX_LEAD_TIME_S}] s, got {}",
+                    cfg.staged_lead_s
+                )
+            )
+        );
+        ensure!(
             cfg.frame.robot_base_origin_m.iter().all(|v| v.is_finite())
                 && cfg.frame.robot_base_yaw_deg.is_finite(),
             Error::config("frame", "values must be finite")
@@ -406,6 +421,7 @@ mod tests {
         // At the bounds: accepted.
         assert!(with("max_duration_s", "3600.0").is_ok());
         assert!(with("lead_time_s", "600.0").is_ok());
+        assert!(with("staged_lead_s", "600.0").is_ok());
         assert!(with("wait_for_client_ms", "1000.0").is_ok());
         let never = with("wait_for_client_ms", "0.0").unwrap().emulator;
         assert_eq!(never.wait_for_client(4), None, "0: the clock never waits");
@@ -428,6 +444,8 @@ mod tests {
             ("max_duration_s", "nan", "3600"),
             ("lead_time_s", "600.5", "600"),
             ("lead_time_s", "1e20", "600"),
+            ("staged_lead_s", "600.5", "600"),
+            ("staged_lead_s", "-1.0", "600"),
             ("cue_rate_hz", "1e20", "120"),
             ("wait_for_client_ms", "1000.5", "1000"),
             ("wait_for_client_ms", "-1.0", "[0, 1000]"),

@@ -276,7 +276,7 @@ fn nothing_moves_before_the_first_cue_output() {
         cfg: &spec.config,
         clock: Clock::Mock,
         n_handovers: 3,
-        planned_start: vec![0.0, 0.0, 0.0],
+        need_after_release_s: vec![0.0, 0.0, 0.0],
         simulated: true,
         control_scheduling: std::sync::OnceLock::new(),
     };

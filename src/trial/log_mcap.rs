@@ -95,7 +95,7 @@ pub(crate) const CHANNELS: [ChannelSpec; 10] = [
         schema_name: "hrc_adapt.Adaptation",
         schema: schema!(
             "Adaptation: scales (0..1], timing (s), gate, reason",
-            r#"{"t_s":{"type":"number"},"speed_scale":{"type":"number"},"acceleration_scale":{"type":"number"},"jerk_scale":{"type":"number"},"timing":{"type":"object","properties":{"start_delay_s":{"type":"number"},"min_approach_duration_s":{"type":"number"},"wait_for_attention":{"type":"boolean"},"present_requires_collaboration_attention":{"type":"boolean"},"hold_while_in_instruction_area":{"type":"boolean"},"max_assembly_deferral_s":{"type":"number"}}},"gate":{"type":"object","properties":{"clear":{"type":"boolean"},"hold":{"type":["string","null"]}}},"reason":{"type":"object","properties":{"indicator":{"type":"string"},"strength":{"type":"number"}}}}"#
+            r#"{"t_s":{"type":"number"},"speed_scale":{"type":"number"},"acceleration_scale":{"type":"number"},"jerk_scale":{"type":"number"},"timing":{"type":"object","properties":{"start_delay_s":{"type":"number"},"min_approach_duration_s":{"type":"number"},"wait_for_attention":{"type":"boolean"},"present_requires_collaboration_attention":{"type":"boolean"},"hold_while_in_instruction_area":{"type":"boolean"},"max_assembly_deferral_s":{"type":"number"},"present_timeout_s":{"type":["number","null"]}}},"gate":{"type":"object","properties":{"clear":{"type":"boolean"},"hold":{"type":["string","null"]}}},"reason":{"type":"object","properties":{"indicator":{"type":"string"},"strength":{"type":"number"}}}}"#
         ),
     },
     ChannelSpec {

@@ -123,7 +123,7 @@ pub(crate) fn phase_name(p: Phase) -> &'static str {
 /// Maps a policy's [`Adaptation`] onto adapt's inputs (the policies crate docs' mapping):
 /// speed scale → speed scale; smoothness = min(acceleration scale, √jerk scale) (adapt scales
 /// acceleration × s and jerk × s²); start delay; minimum approach duration; `gates_start()` →
-/// wait-for-attention with `gate.clear` as "attention on the robot".
+/// wait-for-attention with `gate.clear` as "attention on the robot"; the present timeout.
 ///
 /// The rule table bounds the timings to [0, `policies::MAX_TIMING_S`]; a timing outside that
 /// (built in code, or NaN) cannot panic here: it fails closed to the longest delay and the
@@ -143,6 +143,9 @@ pub(super) fn motion_adaptation(a: &Adaptation) -> MotionAdaptation {
         min_approach_duration: bounded(a.timing.min_approach_duration_s),
         wait_for_attention: a.timing.gates_start(),
         attention_on_robot: a.gate.clear,
+        // Not a safety matter (the part is held longer or shorter): a timeout that does not map
+        // leaves the task's own.
+        present_timeout: a.timing.present_timeout_s.filter(|s| *s > 0.0).map(bounded),
     }
 }
 
@@ -804,21 +807,22 @@ fn drive<R: TrialRobot>(
     )?;
 
     let n_handovers = operator.params().handovers() as u32;
-    // Nominal need time of part k: the operator's nominal work before it, with the expected
-    // excursion overhead; the robot starts fetching `lead_time_s` earlier.
+    // Nominal need time of part k, counted from the release of part k − 1 (from the start for
+    // the first): segment k's work begins only once the operator holds the previous part, so
+    // a schedule in absolute time runs ahead of the operator by every earlier handover's
+    // duration (issue 14). The segment's nominal work with the expected excursion overhead;
+    // the robot starts fetching `lead_time_s` earlier.
     let overhead = operator.params().overhead_factor();
-    let planned_start: Vec<f64> = (0..n_handovers as usize)
-        .map(|k| {
-            let work: f64 = operator.params().work_s[..=k].iter().sum();
-            (work * overhead - cfg.lead_time_s).max(0.0)
-        })
+    let need_after_release_s: Vec<f64> = operator.params().work_s[..n_handovers as usize]
+        .iter()
+        .map(|work| work * overhead)
         .collect();
 
     let plan = LoopPlan {
         cfg,
         clock,
         n_handovers,
-        planned_start,
+        need_after_release_s,
         simulated,
         control_scheduling: std::sync::OnceLock::new(),
     };
@@ -918,7 +922,9 @@ struct LoopPlan<'a> {
     cfg: &'a TrialConfig,
     clock: Clock,
     n_handovers: u32,
-    planned_start: Vec<f64>,
+    /// The operator's nominal need time of part k after the release of part k − 1 (after the
+    /// trial's start for k = 0) [s]; the fetch starts `lead_time_s` before it.
+    need_after_release_s: Vec<f64>,
     simulated: bool,
     /// How the control thread was scheduled (set by the threaded loop; unset on the mock
     /// clock, where no thread is spawned).
@@ -1065,7 +1071,7 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
     let cfg = plan.cfg;
     let clock = plan.clock;
     let n_handovers = plan.n_handovers;
-    let planned_start = &plan.planned_start;
+    let need_after_release_s = &plan.need_after_release_s;
     let simulated = plan.simulated;
     let max_cycles = (cfg.max_duration_s / CYCLE_S).ceil() as u64;
     let mut motion = MotionAdaptation::default();
@@ -1073,6 +1079,8 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
     let mut last_cue_t = 0.0;
     // Whether a cue output has arrived yet (handovers are armed only after it).
     let mut cue_seen = false;
+    // When the last part was released [s] (0: none yet); the next need is counted from it.
+    let mut last_release_t = 0.0;
     let mut started: u32 = 0; // handovers armed
     let mut done: u32 = 0; // handovers completed
     let mut prev_tcp_v = [0.0f64; 3];
@@ -1272,7 +1280,14 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
                 && cue_seen
                 && started == done
                 && started < n_handovers
-                && t >= planned_start[started as usize]
+                && t >= last_release_t + need_after_release_s[started as usize]
+                    - cfg.lead_time_s
+                    - if motion.wait_for_attention {
+                        // Held until the operator is ready: staged early, outside the shared zone.
+                        cfg.staged_lead_s
+                    } else {
+                        0.0
+                    }
             {
                 if phase == Phase::Done {
                     cc.controller.reset_task();
@@ -1306,6 +1321,7 @@ fn control_loop<R: TrialRobot, L: ControlSink, C: CueLink<L>>(
             if released {
                 link.released(t, log)?;
                 done += 1;
+                last_release_t = t;
             }
             if program_stopped {
                 reason = reason::ROBOT_PROGRAM_STOPPED;
