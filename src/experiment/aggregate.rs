@@ -12,7 +12,11 @@
 //!   (`hrc_cwl_mean.cumulative`); `null` is a missing value;
 //! - `robot_wait_s`, `operator_wait_s`: sums over `handovers[]` of the non-`null` waits (a
 //!   `null` wait, e.g. a handover never grasped, contributes nothing; a trial without handovers
-//!   sums to 0).
+//!   sums to 0);
+//! - `return_rate`: the share of `handovers[]` with `returned` (a part that went back at least
+//!   once); NaN for a trial without handovers;
+//! - `part_wait_share`: the summed `robot_wait_s` (time a part waited at the handover point)
+//!   over `completion_time_s`; NaN for a trial of zero length.
 //!
 //! Missing values are NaN in [`TrialOutcome::metrics`]; every statistic leaves them out (the
 //! table counts only present values, a pair or a Friedman block with a missing value is dropped
@@ -24,7 +28,7 @@ use crate::stats;
 
 /// The per-trial outcomes compared between policies, in this order: the `summary.json` key (or,
 /// for the two wait times, the sum over `handovers[]`) and the report label.
-pub(crate) const METRICS: [&str; 7] = [
+pub(crate) const METRICS: [&str; 9] = [
     "completion_time_s",
     "hesitation_share",
     "hrc_cwl_mean",
@@ -32,6 +36,8 @@ pub(crate) const METRICS: [&str; 7] = [
     "robot_idle_s",
     "robot_wait_s",
     "operator_wait_s",
+    "return_rate",
+    "part_wait_share",
 ];
 
 /// One trial's `summary.json`, reduced to what the experiment statistics use.
@@ -103,19 +109,40 @@ pub(crate) fn parse_summary(text: &str) -> crate::Result<TrialOutcome> {
             })
         })
     };
+    let mut returned = 0usize;
+    for (i, h) in handovers.iter().enumerate() {
+        let r = h["returned"]
+            .as_bool()
+            .ok_or_else(|| bad(format!("handovers[{i}].returned missing or not a boolean")))?;
+        returned += usize::from(r);
+    }
+    let return_rate = if handovers.is_empty() {
+        f64::NAN
+    } else {
+        returned as f64 / handovers.len() as f64
+    };
+    let completion = num("completion_time_s")?;
+    let robot_wait = wait_sum("robot_wait_s")?;
+    let part_wait_share = if completion > 0.0 {
+        robot_wait / completion
+    } else {
+        f64::NAN
+    };
     Ok(TrialOutcome {
         participant,
         condition,
         policy,
         simulated,
         metrics: [
-            num("completion_time_s")?,
+            completion,
             nullable("hesitation_share", "assessed")?,
             nullable("hrc_cwl_mean", "cumulative")?,
             num("operator_idle_s")?,
             num("robot_idle_s")?,
-            wait_sum("robot_wait_s")?,
+            robot_wait,
             wait_sum("operator_wait_s")?,
+            return_rate,
+            part_wait_share,
         ],
     })
 }
@@ -406,8 +433,29 @@ mod tests {
             ),
             ("P01", "L2", "adaptive", true)
         );
-        // Assessed share and cumulative mean, not the decoys; the null waits add nothing.
-        assert_eq!(o.metrics, [100.0, 0.1, 0.4, 10.0, 3.0, 2.5, 4.0]);
+        // Assessed share and cumulative mean, not the decoys; the null waits add nothing. By
+        // hand: one of the three handovers returned its part (1/3), and the parts waited
+        // 2.0 + 0.5 s of the 100 s trial at the handover point (0.025).
+        assert_eq!(
+            o.metrics,
+            [100.0, 0.1, 0.4, 10.0, 3.0, 2.5, 4.0, 1.0 / 3.0, 0.025]
+        );
+        // No handover: no return rate (a missing value); the waits sum to 0.
+        let text = summary("P01", "L2", "adaptive", 100.0, [2.0, 3.0]);
+        let start = text.find(r#""handovers": ["#).unwrap();
+        let end = text[start..].find("]").unwrap() + start + 1;
+        let none = format!("{}\"handovers\": []{}", &text[..start], &text[end..]);
+        let o = parse_summary(&none).unwrap();
+        assert!(o.metrics[7].is_nan(), "{:?}", o.metrics);
+        assert_eq!((o.metrics[5], o.metrics[8]), (0.0, 0.0));
+        // `returned` must be a boolean.
+        let bad = summary("P01", "L2", "adaptive", 100.0, [2.0, 3.0]).replacen(
+            r#""returned": false"#,
+            r#""returned": 0"#,
+            1,
+        );
+        let err = parse_summary(&bad).unwrap_err();
+        assert!(err.to_string().contains("handovers[0].returned"), "{err}");
 
         // `null` share and mean (C never 1, no frames) are missing values, not errors.
         let text = summary("P01", "L2", "adaptive", 100.0, [2.0, 3.0])
@@ -501,16 +549,16 @@ mod tests {
         assert_eq!(tests[0].n_pairs, 8);
         // Differences −5 − i, i = 0..8: median −8.5.
         assert_eq!(tests[0].median_difference, -8.5);
-        // Robot idle and both wait totals are equal under both policies: not testable, and
-        // left out of the Holm family, which is the 4 metrics that scale with completion time
-        // (all p = 2/256 → Holm 4·p).
-        for (t, testable) in tests
-            .iter()
-            .zip([true, true, true, true, false, false, false])
-        {
+        // Robot idle, both wait totals and the return rate (1/3 in every trial) are equal
+        // under both policies: not testable, and left out of the Holm family, which is the 5
+        // metrics that scale with completion time, the part-wait share (the same wait over a
+        // shorter trial) among them (all p = 2/256 → Holm 5·p).
+        let testable = [true, true, true, true, false, false, false, false, true];
+        assert_eq!(testable.len(), tests.len());
+        for (t, testable) in tests.iter().zip(testable) {
             assert_eq!(t.wilcoxon.is_ok(), testable, "{}", METRICS[t.metric]);
             match t.p_holm {
-                Some(q) => assert!((q - 4.0 * 2.0 / 256.0).abs() < 1e-15),
+                Some(q) => assert!((q - 5.0 * 2.0 / 256.0).abs() < 1e-15),
                 None => assert!(!testable),
             }
         }

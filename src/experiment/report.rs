@@ -55,6 +55,8 @@ pub(crate) const LABELS: [&str; METRICS.len()] = [
     "robot idle time [s]",
     "robot wait, sum over handovers [s]",
     "operator wait, sum over handovers [s]",
+    "handovers with a returned part [-]",
+    "share of the trial a part waited at the handover point [-]",
 ];
 
 /// A number for JSON: non-finite values become `null`.
@@ -111,6 +113,8 @@ pub(crate) fn write(dir: &Path, inp: &Inputs<'_>) -> crate::Result<PathBuf> {
             "hrc_cwl_mean": "hrc_cwl_mean.cumulative",
             "robot_wait_s": "sum of non-null handovers[].robot_wait_s",
             "operator_wait_s": "sum of non-null handovers[].operator_wait_s",
+            "return_rate": "share of handovers[] with returned = true",
+            "part_wait_share": "sum of non-null handovers[].robot_wait_s / completion_time_s",
         },
         "trials": inp.runs.iter().map(|r| json!({
             "participant": r.trial.participant,

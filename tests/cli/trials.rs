@@ -288,3 +288,58 @@ fn saf_req_003_004_005_never_act_and_the_motion_is_smooth_in_simulated_trials() 
         );
     }
 }
+
+/// Issue 14, handover timing: in the demo trial (P01, L2, seed 1) the adaptive policy holds each
+/// part at the staging pose until the operator's attention is confirmed on the collaboration
+/// area, so no part is presented to an operator still assembling and none goes back: on the
+/// mock clock and over loopback RTDE to the emulator at speedups 4 (the demo's) and 1 (real
+/// time). The fixed policy, which presents on the schedule alone, returns parts in the same
+/// trial on the mock clock (so the check can fail). Judged per handover (`summary.json`'s
+/// `handovers[].returned`: a `part_returned` task event for that handover), not from a rate.
+#[test]
+fn the_demo_trial_with_the_adaptive_policy_returns_no_part() {
+    let returned = |out: &Path| -> Vec<bool> {
+        let s = summary(out);
+        assert_eq!(s["finish_reason"], "completed", "{s}");
+        let h = s["handovers"].as_array().expect("handovers");
+        assert_eq!(h.len(), 3, "L2 has three handovers: {s}");
+        h.iter()
+            .map(|h| h["returned"].as_bool().expect("returned"))
+            .collect()
+    };
+    let demo = ["--condition", "L2", "--seed", "1"];
+    {
+        let _shared = shared();
+        let dir = tempfile::tempdir().unwrap();
+        let sim = [&demo[..], &["--robot", "sim", "--policy"]].concat();
+        let adaptive = run(dir.path(), 400.0, &[&sim[..], &["adaptive"]].concat());
+        assert_eq!(returned(&adaptive), [false; 3], "adaptive, sim");
+        let fixed = run(dir.path(), 400.0, &[&sim[..], &["fixed"]].concat());
+        assert!(
+            returned(&fixed).contains(&true),
+            "the fixed policy returned no part either: the check cannot tell them apart"
+        );
+    }
+    let _alone = PACED.write().unwrap_or_else(|e| e.into_inner());
+    for speedup in ["4", "1"] {
+        let dir = tempfile::tempdir().unwrap();
+        let args = [
+            &demo[..],
+            &[
+                "--robot",
+                "emulator",
+                "--speedup",
+                speedup,
+                "--policy",
+                "adaptive",
+            ],
+        ]
+        .concat();
+        let out = run(dir.path(), 400.0, &args);
+        assert_eq!(
+            returned(&out),
+            [false; 3],
+            "adaptive, emulator at speedup {speedup}"
+        );
+    }
+}
