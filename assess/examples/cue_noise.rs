@@ -54,7 +54,11 @@ mod moving;
 #[path = "../tests/support/scenes.rs"]
 mod scenes;
 
+#[path = "support/stats.rs"]
+mod stats;
+
 use scenes::SplitMix64;
+use stats::mean;
 
 type Res<T> = Result<T, Box<dyn std::error::Error>>;
 
@@ -403,10 +407,6 @@ fn series(samples: &[Sample]) -> [Series; 6] {
 const HEADER: &str = "photo,scale,motion,depth,cue,unit,n,depth_share,conf_mean,conf_min,conf_max,\
                       lm_score_mean,sd_x,sd_y,sd_z,sd_axis_rms,sd_diff,lag1_autocorr,\
                       trend_per_s,vh_median_m_s,vh_p90_m_s";
-
-fn mean(v: &[f64]) -> f64 {
-    v.iter().sum::<f64>() / v.len() as f64
-}
 
 /// CSV rows of one run (missing cues: a row with n = 0).
 fn rows(photo: &str, scale: f64, motion: &str, depth: &str, s: &[Series; 6], out: &mut String) {
