@@ -54,6 +54,9 @@ pub(crate) struct TrialOutcome {
     /// The [`METRICS`] values, in that order; the wait times are totals over the trial's
     /// handovers [s]; NaN for a missing value (`null` in the summary).
     pub(crate) metrics: [f64; METRICS.len()],
+    /// `adaptation_changes.by_indicator`: how often the policy adopted each rule (its key:
+    /// `AED`, …, `none`).
+    pub(crate) rules_adopted: BTreeMap<String, u64>,
 }
 
 /// Parses one `summary.json` text (the schema of the module docs).
@@ -109,6 +112,18 @@ pub(crate) fn parse_summary(text: &str) -> crate::Result<TrialOutcome> {
             })
         })
     };
+    let by_indicator = v["adaptation_changes"]["by_indicator"]
+        .as_object()
+        .ok_or_else(|| bad("adaptation_changes.by_indicator missing or not an object".into()))?;
+    let mut rules_adopted = BTreeMap::new();
+    for (key, n) in by_indicator {
+        let n = n.as_u64().ok_or_else(|| {
+            bad(format!(
+                "adaptation_changes.by_indicator.{key} is not a whole number"
+            ))
+        })?;
+        rules_adopted.insert(key.clone(), n);
+    }
     let mut returned = 0usize;
     for (i, h) in handovers.iter().enumerate() {
         let r = h["returned"]
@@ -144,7 +159,22 @@ pub(crate) fn parse_summary(text: &str) -> crate::Result<TrialOutcome> {
             return_rate,
             part_wait_share,
         ],
+        rules_adopted,
     })
+}
+
+/// Per policy and rule key: how often the rule was adopted over all trials, and in how many
+/// trials at least once ("how often each rule fired").
+pub(crate) fn rules_fired(outcomes: &[TrialOutcome]) -> BTreeMap<(String, String), (u64, usize)> {
+    let mut out: BTreeMap<(String, String), (u64, usize)> = BTreeMap::new();
+    for o in outcomes {
+        for (key, &n) in &o.rules_adopted {
+            let e = out.entry((o.policy.clone(), key.clone())).or_default();
+            e.0 += n;
+            e.1 += usize::from(n > 0);
+        }
+    }
+    out
 }
 
 /// Reads `summary.json` from every direct sub-folder of `runs` that has one, sorted by folder
@@ -410,7 +440,7 @@ mod tests {
                 "hrc_cwl_mean": {{"cumulative": {cwl}, "windowed": 0.99}},
                 "hrc_cwl_max": {{"cumulative": 0.98, "windowed": 0.97}},
                 "dominant_time_s": {{"AED": 1.0, "none": 2.0}},
-                "adaptation_changes": {{"total": 0, "by_indicator": {{}}}},
+                "adaptation_changes": {{"total": 3, "by_indicator": {{"OHD": 2, "none": 1}}}},
                 "safety_events": {{"total": 0, "by_reaction": {{}}, "by_requirement": {{}}}},
                 "assessed_frames": 100}}"#,
             h = t / 1000.0,
@@ -440,6 +470,16 @@ mod tests {
             o.metrics,
             [100.0, 0.1, 0.4, 10.0, 3.0, 2.5, 4.0, 1.0 / 3.0, 0.025]
         );
+        assert_eq!(
+            o.rules_adopted,
+            BTreeMap::from([("OHD".to_owned(), 2), ("none".to_owned(), 1)])
+        );
+        // Over two trials of each policy: adoptions summed, trials with one counted.
+        let mut two = vec![o.clone(), o.clone()];
+        two[1].rules_adopted.insert("OHD".to_owned(), 0);
+        let fired = rules_fired(&two);
+        assert_eq!(fired[&("adaptive".to_owned(), "OHD".to_owned())], (2, 1));
+        assert_eq!(fired[&("adaptive".to_owned(), "none".to_owned())], (2, 2));
         // No handover: no return rate (a missing value); the waits sum to 0.
         let text = summary("P01", "L2", "adaptive", 100.0, [2.0, 3.0]);
         let start = text.find(r#""handovers": ["#).unwrap();

@@ -93,6 +93,7 @@ pub(crate) fn write(dir: &Path, inp: &Inputs<'_>) -> crate::Result<PathBuf> {
         .collect();
     let failures: Vec<&TrialRun> = inp.runs.iter().filter(|r| r.error.is_some()).collect();
     let simulated = inp.outcomes.iter().all(|o| o.simulated);
+    let fired = aggregate::rules_fired(inp.outcomes);
 
     // ---- JSON
     let summary = json!({
@@ -106,6 +107,9 @@ pub(crate) fn write(dir: &Path, inp: &Inputs<'_>) -> crate::Result<PathBuf> {
             "square_rows": inp.schedule.square_rows,
             "complete": inp.schedule.complete,
         },
+        "rules_fired": fired.iter().map(|((p, k), (n, trials))| json!({
+            "policy": p, "rule": k, "adoptions": n, "trials": trials,
+        })).collect::<Vec<_>>(),
         "jobs": inp.jobs,
         "wall_time_s": inp.wall_s,
         "metric_sources": {
@@ -266,6 +270,22 @@ pub(crate) fn write(dir: &Path, inp: &Inputs<'_>) -> crate::Result<PathBuf> {
         w.push_str("</tr>\n");
     }
     w.push_str("</table><p>Cells: mean / median (n).</p>\n");
+
+    w.push_str(
+        "<h2>Rules fired (SIMULATED)</h2>\n<p>How often each policy adopted each rule of its \
+         table, summed over the trials (<code>adaptation_changes.by_indicator</code>), and in \
+         how many trials at least once. The first adoption of <code>none</code> at the start \
+         is not a change and is not counted.</p>\n<table><tr><th>policy</th><th>rule</th>\
+         <th>adoptions</th><th>trials</th></tr>\n",
+    );
+    for ((p, k), (n, trials)) in &fired {
+        w.push_str(&format!(
+            "<tr><td>{}</td><td>{}</td><td>{n}</td><td>{trials}</td></tr>\n",
+            esc(p),
+            esc(k)
+        ));
+    }
+    w.push_str("</table>\n");
 
     w.push_str(&format!(
         "<h2>{} vs {} (SIMULATED)</h2>\n<p>Wilcoxon signed-rank on {} − {}, one pair per \
