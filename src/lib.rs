@@ -83,6 +83,7 @@ mod error;
 pub mod assess_cmd;
 #[cfg(feature = "vision")]
 pub mod calibrate_cmd;
+pub mod episodes_cmd;
 pub mod experiment;
 mod report;
 pub mod robot_cmd;

@@ -3,7 +3,7 @@
 //! used: it prints the library's [`hrc_adapt::Error`] with its whole chain of causes.
 
 use clap::{Parser, Subcommand};
-use hrc_adapt::{assess_cmd, experiment, robot_cmd, trial};
+use hrc_adapt::{assess_cmd, episodes_cmd, experiment, robot_cmd, trial};
 
 /// Adapts a UR5e cobot to its human operator from vision-based cognitive-workload assessment.
 #[derive(Debug, Parser)]
@@ -28,6 +28,9 @@ enum Command {
     Trial(trial::TrialArgs),
     /// Run a policy A/B experiment from a schedule and report its statistics.
     Experiment(experiment::ExperimentArgs),
+    /// Measure the assessed against the simulated hesitation, episode by episode, over seeds ×
+    /// conditions (SIMULATED ground truth).
+    Episodes(episodes_cmd::EpisodesArgs),
     /// Print configuration files.
     Config(ConfigArgs),
 }
@@ -74,6 +77,7 @@ fn run() -> anyhow::Result<()> {
         Command::Emulate(args) => robot_cmd::emulate(args)?,
         Command::Trial(args) => trial::run(args)?,
         Command::Experiment(args) => experiment::run(args)?,
+        Command::Episodes(args) => episodes_cmd::run(args)?,
         Command::Config(args) => {
             anyhow::ensure!(args.print_default, "nothing to do: pass --print-default");
             print!("{}", assess::AssessConfig::default().to_toml_string()?);

@@ -16,6 +16,8 @@
 //! - `hesitation_share.assessed`: Σ Δt over frames with H = 1 / Σ Δt over frames with C = 1.
 //!   `hesitation_share.ground_truth`: the time the simulated operator's `Hesitation` episodes
 //!   overlap those C = 1 frames, over the same denominator. `null` when C was never 1.
+//! - `hesitation_episodes`: assessed against simulated hesitation episode by episode (recall,
+//!   precision, onset delay, every episode), defined in `hesitation_episodes.rs`.
 //! - `hrc_cwl_mean` / `hrc_cwl_max`: the cumulative and windowed HRC-CWL; the mean is
 //!   time-weighted by Δt (the plain mean if every Δt is 0).
 //! - `dominant_time_s`: Σ Δt per reported dominant indicator (`AED`, `TID`, `ICD`, `ASD_ctx`,
@@ -41,6 +43,10 @@ use super::TrialMeta;
 use super::motion::{MotionMetrics, MotionSummary, requirement_index};
 use crate::trial::events::TrialEvent;
 
+#[path = "hesitation_episodes.rs"]
+pub(crate) mod episodes;
+pub(crate) use episodes::HesitationEpisodes;
+
 /// What the summary needs of one assessed frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct FrameRecord {
@@ -50,6 +56,8 @@ pub(crate) struct FrameRecord {
     pub(crate) dt_s: f64,
     /// C(t) = 1.
     pub(crate) collaborating: bool,
+    /// C ∧ G ∧ v_h < v_th: a low-motion run continues or starts (MODEL.md §7).
+    pub(crate) low_motion: bool,
     /// H(t) = 1.
     pub(crate) hesitating: bool,
     /// Cumulative HRC-CWL [-].
@@ -67,6 +75,7 @@ impl FrameRecord {
             t_s: a.t,
             dt_s: a.dt_s,
             collaborating: a.collaborating,
+            low_motion: a.low_motion,
             hesitating: a.hesitating,
             hrc_cwl: a.cumulative.hrc_cwl,
             hrc_cwl_windowed: a.windowed.hrc_cwl,
@@ -181,6 +190,8 @@ pub(crate) struct Summary {
     pub(crate) operator_idle_s: f64,
     /// Hesitation shares.
     pub(crate) hesitation_share: HesitationShare,
+    /// Assessed against simulated hesitation, episode by episode.
+    pub(crate) hesitation_episodes: HesitationEpisodes,
     /// Time-weighted mean HRC-CWL [-].
     pub(crate) hrc_cwl_mean: CwlPair,
     /// Maximum HRC-CWL [-].
@@ -256,6 +267,7 @@ pub(crate) fn compute(
     // Intervals driven by state events.
     let mut robot_idle = 0.0;
     let mut phase: Option<(&str, f64)> = None;
+    let mut phase_changes: Vec<(f64, &str)> = Vec::new();
     let mut operator_idle = 0.0;
     let mut idle_since: Option<f64> = None;
     let mut hesitations: Vec<(f64, f64)> = Vec::new();
@@ -284,6 +296,7 @@ pub(crate) fn compute(
                     robot_idle += t - since;
                 }
                 phase = Some((p, t));
+                phase_changes.push((t, p));
             }
             TrialEvent::Presented { handover } => {
                 let h = handovers.entry(handover).or_default();
@@ -427,6 +440,7 @@ pub(crate) fn compute(
             ground_truth: share(overlap(&collab_intervals, &hesitations)),
             collaboration_time_s: r6(collab_time),
         },
+        hesitation_episodes: episodes::compute(&frames, &hesitations, &phase_changes),
         hrc_cwl_mean: CwlPair {
             cumulative: mean(sum_c, |f| f.hrc_cwl),
             windowed: mean(sum_w, |f| f.hrc_cwl_windowed),
@@ -479,6 +493,7 @@ mod tests {
             t_s,
             dt_s: 1.0,
             collaborating: c,
+            low_motion: h,
             hesitating: h,
             hrc_cwl: cwl,
             hrc_cwl_windowed: win,
@@ -603,6 +618,25 @@ mod tests {
             "operator_idle_s": 3.0,
             // Ground truth: (1 + 0.5) / 4 = 0.375.
             "hesitation_share": {"assessed": 0.5, "ground_truth": 0.375, "collaboration_time_s": 4.0},
+            // Episodes: truth [3.5, 4.5] (no H frame in it: missed) and [5.5, 9] (first H
+            // frame t = 6: delay 0.5; its run starts at 5 − 1 = 4: attributed 4 − 5.5 = −1.5).
+            // One assessed run, frames 5–6: start 4, detected 5, end 6; it overlaps
+            // [3.5, 4.5] (matched); the phase at 5 is Retreat (from 4.5).
+            "hesitation_episodes": {
+                "ground_truth": 2, "detected": 1, "recall": 0.5,
+                "assessed": 1, "matched": 1, "precision": 1.0,
+                "onset_delay_median_s": 0.5,
+                "truth_episodes": [
+                    {"start_s": 3.5, "end_s": 4.5, "detected_s": null, "delay_s": null,
+                     "attributed_onset_s": null},
+                    {"start_s": 5.5, "end_s": 9.0, "detected_s": 6.0, "delay_s": 0.5,
+                     "attributed_onset_s": -1.5}
+                ],
+                "assessed_episodes": [
+                    {"start_s": 4.0, "detected_s": 5.0, "end_s": 6.0, "matched": true,
+                     "phase": "Retreat"}
+                ]
+            },
             "hrc_cwl_mean": {"cumulative": 0.55, "windowed": 0.4},
             "hrc_cwl_max": {"cumulative": 1.0, "windowed": 0.6},
             "dominant_time_s": {"AED": 0.0, "ASD_ctx": 0.0, "ICD": 4.0, "OHD": 4.0, "TID": 0.0, "none": 2.0},

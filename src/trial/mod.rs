@@ -42,6 +42,8 @@ use policies::PolicyKind;
 pub(crate) use backend::rtde_runtime;
 #[allow(unused_imports)] // for the experiment runner
 pub(crate) use cues::CueSource;
+pub(crate) use log::SUMMARY_FILE;
+pub(crate) use log::summary::episodes;
 pub use runtime::{TrialSpec, run_simulated};
 
 /// Arguments of `hrc-adapt trial`.
