@@ -15,6 +15,10 @@
 //! 5. Exits non-zero when any trial failed, after everything above is written, naming how many
 //!    and where their errors and logs are.
 //!
+//! With `--replicate N` it runs N seeded replications and a power table ([`replicate`]); with
+//! `--sensitivity <file.toml>` the experiment once per variant of the simulated operator's
+//! response to the robot and a sensitivity table ([`sensitivity`]).
+//!
 //! With `--participant P03 --robot <ip|emulator>` it instead guides one participant's real
 //! session, trial by trial, with start / pause / skip / quit prompts and the NASA-TLX ratings
 //! after each trial ([`session`]).
@@ -22,6 +26,7 @@
 pub(crate) mod aggregate;
 pub(crate) mod replicate;
 pub(crate) mod report;
+pub(crate) mod sensitivity;
 pub(crate) mod session;
 
 use std::collections::VecDeque;
@@ -35,7 +40,7 @@ use serde::Deserialize;
 
 use crate::Error;
 use crate::error::ResultExt as _;
-use crate::trial::config::TrialConfig;
+use crate::trial::config::{OperatorResponse, TrialConfig};
 use crate::trial::{CueSource, TrialSpec, run_simulated};
 
 /// Arguments of `hrc-adapt experiment`.
@@ -57,6 +62,12 @@ pub struct ExperimentArgs {
     #[arg(long, conflicts_with = "participant", value_name = "N",
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(2..=1000))]
     replicate: Option<usize>,
+    /// Run the simulated experiment once per variant of the simulated operator's response to
+    /// the robot listed in this TOML file (`config/sensitivity.toml`), each a whole experiment
+    /// in `<variant>/`, and write a sensitivity table (`sensitivity.csv`, `sensitivity.md`):
+    /// per variant and metric the median paired difference, rank-biserial r, p and Holm p.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["participant", "replicate"])]
+    sensitivity: Option<PathBuf>,
     /// Guide this participant's real session (their schedule rows, trial by trial, with
     /// prompts and NASA-TLX) instead of running the simulated experiment. An id of the
     /// schedule (`P01`, …; [A-Za-z0-9_-]{1,32}, as it names the session folder).
@@ -335,6 +346,44 @@ pub fn run(args: ExperimentArgs) -> crate::Result<()> {
         Error::usage("--jobs", "--jobs must be at least 1")
     );
     let show = std::io::stderr().is_terminal();
+    if let Some(file) = &args.sensitivity {
+        let wanted = args
+            .out_root
+            .join(format!("{}-sensitivity", crate::trial::wall_stamp()));
+        let out = sensitivity::run_sensitivity(&args.config, file, &wanted, jobs, show)?;
+        eprintln!(
+            "[simulation] {} variants: {} trials ({} failed); sensitivity table in {}",
+            out.variants.len(),
+            out.trials,
+            out.failed,
+            out.dir.join("sensitivity.md").display()
+        );
+        for metric in aggregate::METRICS {
+            let effects: Vec<String> = out
+                .rows
+                .iter()
+                .filter(|r| r.metric == metric)
+                .map(|r| {
+                    format!(
+                        "{} {:.3} (p {:.3})",
+                        r.variant, r.effect.median_difference, r.effect.p_value
+                    )
+                })
+                .collect();
+            eprintln!("  {metric:<18} {}", effects.join(", "));
+        }
+        println!("{}", out.dir.display());
+        ensure!(
+            out.failed == 0,
+            Error::ExperimentFailed {
+                failed: out.failed,
+                trials: out.trials,
+                report: out.dir.join("sensitivity.md"),
+                dir: out.dir,
+            }
+        );
+        return Ok(());
+    }
     if let Some(n) = args.replicate {
         let wanted = args
             .out_root
@@ -552,12 +601,40 @@ pub(crate) fn run_experiment_seeded(
     show_progress: bool,
     seed: Option<u64>,
 ) -> crate::Result<ExperimentOutcome> {
+    let overrides = Overrides {
+        seed,
+        response: None,
+    };
+    run_experiment_with(config_path, wanted, jobs, show_progress, &overrides)
+}
+
+/// What a replication or a sensitivity variant changes in an experiment's files.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct Overrides {
+    /// Replaces the experiment file's seed (a replication).
+    pub(crate) seed: Option<u64>,
+    /// Replaces the trial config's `[operator.response]` (a sensitivity variant; validated by
+    /// the caller).
+    pub(crate) response: Option<OperatorResponse>,
+}
+
+/// [`run_experiment`] with `overrides` applied to the files' values.
+pub(crate) fn run_experiment_with(
+    config_path: &Path,
+    wanted: &Path,
+    jobs: usize,
+    show_progress: bool,
+    overrides: &Overrides,
+) -> crate::Result<ExperimentOutcome> {
     let started = std::time::Instant::now();
     let mut cfg = ExperimentConfig::from_file(config_path)?;
-    if let Some(seed) = seed {
+    if let Some(seed) = overrides.seed {
         cfg.seed = seed;
     }
-    let trial_config = TrialConfig::from_file(&cfg.trial_config)?;
+    let mut trial_config = TrialConfig::from_file(&cfg.trial_config)?;
+    if let Some(response) = overrides.response {
+        trial_config.operator.response = response;
+    }
     let schedule = cfg.design().schedule().map_err(|e| {
         Error::from(e)
             .context("invalid design")

@@ -463,3 +463,123 @@ fn two_replications_write_every_experiment_and_a_consistent_power_table() {
     let md = std::fs::read_to_string(out.dir.join("power.md")).unwrap();
     assert!(md.contains("SIMULATED"), "{md}");
 }
+
+/// `--sensitivity` with two variants on a tiny experiment (2 participants, L1, trials cut at
+/// 15 s, so 8 short trials): one whole experiment per variant in its own folder, each recording
+/// the response it ran with, and `sensitivity.csv`, whose every row is recomputed here from that
+/// variant's own files: its `experiment_summary.json` (the experiment's report) and its trial
+/// folders' `summary.json` (through the aggregation).
+#[test]
+fn two_sensitivity_variants_write_every_experiment_and_a_table_recomputed_from_their_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    short_trial_config(tmp.path(), 15.0);
+    let cfg = tiny_experiment_config(tmp.path(), 2, "\"L1\"", 11);
+    let file = tmp.path().join("sens.toml");
+    std::fs::write(
+        &file,
+        "[[variant]]\nname = \"none\"\nk_speed = 0.0\nk_acc = 0.0\nsurprise_p = 0.0\n\
+         [[variant]]\nname = \"shipped\"\n",
+    )
+    .unwrap();
+    let out =
+        sensitivity::run_sensitivity(&cfg, &file, &tmp.path().join("sens"), 2, false).unwrap();
+    assert_eq!((out.trials, out.failed), (8, 0));
+    assert_eq!(out.variants.len(), 2);
+    let shipped = OperatorResponse::default();
+    let none = OperatorResponse {
+        k_speed: 0.0,
+        k_acc: 0.0,
+        surprise_p: 0.0,
+        ..shipped
+    };
+    assert_eq!(
+        std::fs::read_to_string(out.dir.join("sensitivity.toml")).unwrap(),
+        std::fs::read_to_string(&file).unwrap()
+    );
+    for (v, want) in out.variants.iter().zip([none, shipped]) {
+        let vdir = out.dir.join(&v.name);
+        // The response it ran with, recorded.
+        let text = std::fs::read_to_string(vdir.join(sensitivity::RESPONSE_FILE)).unwrap();
+        let recorded: OperatorResponse = toml::from_str(&text).unwrap();
+        assert_eq!((recorded, v.response), (want, want), "{}", v.name);
+        // A whole experiment: schedule, 4 trials, report.
+        assert_eq!(aggregate::read_outcomes(&vdir).unwrap().len(), 4);
+        assert!(vdir.join("experiment_report.html").is_file());
+    }
+    let csv = std::fs::read_to_string(out.dir.join("sensitivity.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 2 * aggregate::METRICS.len(), "{csv}");
+    // A CSV cell against a value: both empty/absent, or equal to 1e-12 (JSON may round a ULP).
+    let same = |cell: &str, x: Option<f64>| match x.filter(|x| x.is_finite()) {
+        None => cell.is_empty(),
+        Some(x) => cell
+            .parse::<f64>()
+            .is_ok_and(|c| (c - x).abs() <= 1e-12 * x.abs().max(1.0)),
+    };
+    for row in &rows {
+        let vdir = out.dir.join(row[0]);
+        let summary: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(vdir.join("experiment_summary.json")).unwrap(),
+        )
+        .unwrap();
+        let m = summary["policy_comparison"]["metrics"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|m| m["metric"] == row[1])
+            .cloned()
+            .unwrap();
+        assert_eq!(row[2], m["n_pairs"].to_string(), "{row:?}");
+        for (i, key) in [
+            (3, "median_difference"),
+            (4, "rank_biserial"),
+            (5, "p_value"),
+            (6, "p_holm"),
+        ] {
+            assert!(same(row[i], m[key].as_f64()), "{key}: {row:?} {m}");
+        }
+        // And from the trial summaries themselves.
+        let outcomes = aggregate::read_outcomes(&vdir).unwrap();
+        let tests = aggregate::compare_policies(&outcomes, "adaptive", "fixed").unwrap();
+        let t = tests
+            .iter()
+            .find(|t| aggregate::METRICS[t.metric] == row[1])
+            .unwrap();
+        assert_eq!(row[2], t.n_pairs.to_string(), "{row:?}");
+        assert!(same(row[3], Some(t.median_difference)), "{row:?}");
+        let w = t.wilcoxon.as_ref().ok();
+        assert!(same(row[4], w.map(|w| w.rank_biserial)), "{row:?}");
+        assert!(same(row[5], w.map(|w| w.p_value)), "{row:?}");
+        assert!(same(row[6], t.p_holm), "{row:?}");
+    }
+    let md = std::fs::read_to_string(out.dir.join("sensitivity.md")).unwrap();
+    assert!(md.contains("SIMULATED"), "{md}");
+    assert_eq!(md.matches("| completion_time_s |").count(), 2, "{md}");
+}
+
+/// `--sensitivity` with `--replicate` or `--participant` is a usage error naming both.
+#[test]
+fn sensitivity_excludes_replicate_and_participant() {
+    use clap::Parser;
+    #[derive(Debug, clap::Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: ExperimentArgs,
+    }
+    let base = ["x", "--config", "ab.toml", "--sensitivity", "s.toml"];
+    let ok = Cli::try_parse_from(base).unwrap();
+    assert_eq!(ok.args.sensitivity, Some(PathBuf::from("s.toml")));
+    for extra in [["--replicate", "3"], ["--participant", "P01"]] {
+        let e = Cli::try_parse_from(base.iter().chain(&extra)).unwrap_err();
+        let text = e.to_string();
+        assert_eq!(e.kind(), clap::error::ErrorKind::ArgumentConflict, "{text}");
+        assert!(
+            text.contains("--sensitivity") && text.contains(extra[0]),
+            "{text}"
+        );
+    }
+}

@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use robot_io::realtime::RtPriority;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use crate::Error;
 
@@ -59,6 +59,111 @@ pub struct TrialConfig {
     /// The in-process emulator (`--robot emulator`; `[emulator]`; defaults without the table).
     #[serde(default)]
     pub emulator: EmulatorSection,
+    /// The simulated operator (`[operator]`; defaults without the table).
+    #[serde(default)]
+    pub operator: OperatorSection,
+}
+
+/// `[operator]`: the **simulated** operator ([`crate::trial::operator::SimulatedOperator`]).
+/// Simulation only: a trial whose cues come from a camera (`--cues camera`) or a recorded file
+/// (`--cues <file>`) has no simulated operator and ignores it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OperatorSection {
+    /// `[operator.response]`: how the simulated operator responds to the robot.
+    pub response: OperatorResponse,
+}
+
+/// `[operator.response]`: the simulated operator's response to the robot, its effect sizes.
+///
+/// **ASSUMPTION, every field.** The paper gives no hesitation statistics and the bundled KTH
+/// recording has no robot giver, so none of these is measured
+/// (`docs/calibration/operator_fit.md`). They encode the hypothesis the A/B experiment tests
+/// the adaptive policy against: an operator hesitates more when the approach is fast or jerky,
+/// or when a part arrives while their attention is elsewhere. The defaults are the constants
+/// the simulated operator had before they were made configurable (so results did not change);
+/// `hrc-adapt experiment --sensitivity` shows how the A/B result depends on them.
+///
+/// During a collaboration period with the handover pending, with `v` the TCP speed [m/s] and
+/// `a` its peak acceleration over the last cue interval [m/s²]:
+/// - stress `s = k_speed·v/ref_speed_m_s + k_acc·a/ref_acc_m_s2` [-];
+/// - hesitations start at the level's base rate × `(1 + s)` [1/s];
+/// - their median duration is the level's × `(1 + k_duration·s)` [s];
+/// - when the robot starts presenting while the operator's attention is elsewhere (assembling,
+///   or away at the storage or instruction area), a hesitation starts with probability
+///   `surprise_p`, its stress raised by `surprise_stress`.
+///
+/// All zero gains (`k_speed = k_acc = surprise_p = 0`) leave only the base rate: an operator
+/// who does not respond to the robot at all.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OperatorResponse {
+    /// Reference TCP speed of the stress term [m/s], > 0. Assumption: 0.25 m/s, the
+    /// collaborative TCP speed cap, so the cap itself adds `k_speed` of stress.
+    pub ref_speed_m_s: f64,
+    /// Reference TCP acceleration of the stress term [m/s²], > 0. Assumption: 1.0 m/s².
+    pub ref_acc_m_s2: f64,
+    /// Stress per reference speed [-], ≥ 0. Assumption: 1.5 (a fast approach weighs more than
+    /// a jerky one).
+    pub k_speed: f64,
+    /// Stress per reference acceleration [-], ≥ 0. Assumption: 1.0.
+    pub k_acc: f64,
+    /// Relative lengthening of a hesitation per unit of stress [-], ≥ 0. Assumption: 0.5 (a
+    /// stressed operator's hesitation lasts longer, less than in proportion).
+    pub k_duration: f64,
+    /// Probability of a hesitation when the robot starts presenting while the operator's
+    /// attention is elsewhere [-], in [0, 1]. Assumption: 0.5.
+    pub surprise_p: f64,
+    /// Stress such a surprise adds to the hesitation's duration [-], ≥ 0. Assumption: 1.0.
+    pub surprise_stress: f64,
+}
+
+impl Default for OperatorResponse {
+    fn default() -> Self {
+        Self {
+            ref_speed_m_s: 0.25,
+            ref_acc_m_s2: 1.0,
+            k_speed: 1.5,
+            k_acc: 1.0,
+            k_duration: 0.5,
+            surprise_p: 0.5,
+            surprise_stress: 1.0,
+        }
+    }
+}
+
+impl OperatorResponse {
+    /// The fields with their names, in file order.
+    pub(crate) fn fields(&self) -> [(&'static str, f64); 7] {
+        [
+            ("ref_speed_m_s", self.ref_speed_m_s),
+            ("ref_acc_m_s2", self.ref_acc_m_s2),
+            ("k_speed", self.k_speed),
+            ("k_acc", self.k_acc),
+            ("k_duration", self.k_duration),
+            ("surprise_p", self.surprise_p),
+            ("surprise_stress", self.surprise_stress),
+        ]
+    }
+
+    /// Refuses a value out of its range (see the field docs); the error names `prefix` + the
+    /// field (`operator.response.k_speed`) and the value.
+    pub(crate) fn validate(&self, prefix: &str) -> crate::Result<()> {
+        for (key, v) in self.fields() {
+            let (ok, rule) = match key {
+                "ref_speed_m_s" | "ref_acc_m_s2" => {
+                    (v.is_finite() && v > 0.0, "must be finite and > 0")
+                }
+                "surprise_p" => ((0.0..=1.0).contains(&v), "must be a probability in [0, 1]"),
+                _ => (v.is_finite() && v >= 0.0, "must be finite and >= 0"),
+            };
+            ensure!(
+                ok,
+                Error::config(format!("{prefix}{key}"), format!("{rule}, got {v}"))
+            );
+        }
+        Ok(())
+    }
 }
 
 /// `[emulator]`: the in-process emulator of `--robot emulator`.
@@ -325,6 +430,7 @@ impl TrialConfig {
                 format!("must be in [0, 1000] ms, got {wait}")
             )
         );
+        cfg.operator.response.validate("operator.response.")?;
         Ok(cfg)
     }
 
@@ -497,6 +603,88 @@ mod tests {
             // Negative or fractional values are no u8: refused by the parser, naming the key.
             let e = with(key, "-1").unwrap_err().with_causes().to_string();
             assert!(e.contains(key), "{e}");
+        }
+    }
+
+    /// The response defaults are the constants the simulated operator had before they became
+    /// configurable (src/trial/operator.rs `COMMON` at 7d008ab: 0.25 m/s, 1.0 m/s², 1.5, 1.0,
+    /// the duration factor 0.5, 0.5, 1.0), and the shipped file states them.
+    #[test]
+    fn operator_response_defaults_are_the_old_constants_and_the_shipped_values() {
+        let d = OperatorResponse::default();
+        assert_eq!(
+            d,
+            OperatorResponse {
+                ref_speed_m_s: 0.25,
+                ref_acc_m_s2: 1.0,
+                k_speed: 1.5,
+                k_acc: 1.0,
+                k_duration: 0.5,
+                surprise_p: 0.5,
+                surprise_stress: 1.0,
+            }
+        );
+        assert_eq!(TrialConfig::shipped().unwrap().operator.response, d);
+        // Without the table: the defaults.
+        let start = SHIPPED_TOML.find("[operator.response]").unwrap();
+        let end = start + SHIPPED_TOML[start..].find("\n\n").unwrap();
+        let without = format!("{}{}", &SHIPPED_TOML[..start], &SHIPPED_TOML[end..]);
+        assert!(!without.contains("k_speed = "));
+        let cfg = TrialConfig::from_toml_str(&without, Path::new("/cfg")).unwrap();
+        assert_eq!(cfg.operator, OperatorSection::default());
+        // One key given, the others default.
+        let one = with("k_speed", "0.0").unwrap().operator.response;
+        assert_eq!(one, OperatorResponse { k_speed: 0.0, ..d });
+    }
+
+    #[test]
+    fn operator_response_values_out_of_range_and_unknown_keys_are_refused_by_name() {
+        for (key, ok) in [
+            ("k_speed", "0.0"),
+            ("surprise_p", "1.0"),
+            ("surprise_p", "0.0"),
+            ("ref_speed_m_s", "1e-3"),
+        ] {
+            assert!(with(key, ok).is_ok(), "{key} = {ok}");
+        }
+        for (key, bad, rule) in [
+            ("ref_speed_m_s", "0.0", "> 0, got 0"),
+            ("ref_speed_m_s", "-0.25", "> 0, got -0.25"),
+            ("ref_acc_m_s2", "inf", "> 0, got inf"),
+            ("k_speed", "-1.5", ">= 0, got -1.5"),
+            ("k_speed", "nan", ">= 0, got NaN"),
+            ("k_acc", "inf", ">= 0, got inf"),
+            ("k_duration", "-0.5", ">= 0, got -0.5"),
+            ("surprise_p", "1.5", "[0, 1], got 1.5"),
+            ("surprise_p", "-0.1", "[0, 1], got -0.1"),
+            ("surprise_p", "nan", "[0, 1], got NaN"),
+            ("surprise_stress", "-1.0", ">= 0, got -1"),
+        ] {
+            let e = with(key, bad).unwrap_err().with_causes().to_string();
+            assert!(
+                e.contains(&format!("`operator.response.{key}`")) && e.contains(rule),
+                "{key} = {bad}: {e}"
+            );
+        }
+        // An unknown key in the table, or in [operator], is refused by name.
+        for (from, to) in [
+            ("k_speed = ", "k_sped = "),
+            (
+                "[operator.response]",
+                "[operator]\nmood = 1.0\n[operator.response]",
+            ),
+        ] {
+            let text = SHIPPED_TOML.replacen(from, to, 1);
+            let e = TrialConfig::from_toml_str(&text, Path::new("/cfg"))
+                .unwrap_err()
+                .with_causes()
+                .to_string();
+            let key = if from == "k_speed = " {
+                "k_sped"
+            } else {
+                "mood"
+            };
+            assert!(e.contains(key) && e.contains("unknown field"), "{e}");
         }
     }
 

@@ -34,7 +34,8 @@
 //! start at a Poisson rate `base × (1 + k_speed·v/v_ref + k_acc·a/a_ref)` (v, a: the robot TCP's
 //! speed and peak acceleration over the last cue interval) and with an extra probability when
 //! the robot starts presenting while the operator's attention is elsewhere ("surprise"). Their
-//! durations are log-normal, lengthened by the same stress factor.
+//! durations are log-normal, lengthened by the same stress factor. These effect sizes are the
+//! trial config's `[operator.response]` ([`OperatorResponse`], all assumptions).
 //!
 //! **Cues**: head (position and facing), torso and both hands in the workspace frame [m], at the
 //! cue rate, with Gaussian noise and independent and burst dropouts ([`COMMON`]).
@@ -46,6 +47,7 @@ use adapt::task::Phase;
 use assess::{AreaRole, BodyCue, CueFrame, HandCue, HeadCue, Vec3, Workspace};
 use policies::SplitMix64;
 
+use super::config::OperatorResponse;
 use super::events::TrialEvent;
 
 /// Experimental condition (task complexity level) of the paper.
@@ -242,19 +244,6 @@ pub(crate) struct CommonParams {
     pub(crate) burst_p: f64,
     /// See `burst_p` [s].
     pub(crate) burst_s: f64,
-    /// Reference TCP speed for hesitation stress [m/s] (the collaborative TCP cap, 0.25 m/s).
-    pub(crate) ref_speed_m_s: f64,
-    /// Reference TCP acceleration for hesitation stress [m/s²].
-    pub(crate) ref_acc_m_s2: f64,
-    /// Stress weights of speed and acceleration [-].
-    pub(crate) k_speed: f64,
-    /// See `k_speed` [-].
-    pub(crate) k_acc: f64,
-    /// Probability of a hesitation when the robot starts presenting while the operator's
-    /// attention is elsewhere [-], and the stress it adds [-].
-    pub(crate) surprise_p: f64,
-    /// See `surprise_p` [-].
-    pub(crate) surprise_stress: f64,
 }
 
 /// The common parameters (all assumptions; see the field docs).
@@ -274,12 +263,6 @@ pub(crate) const COMMON: CommonParams = CommonParams {
     dropout_p: 0.02,
     burst_p: 0.004,
     burst_s: 0.5,
-    ref_speed_m_s: 0.25,
-    ref_acc_m_s2: 1.0,
-    k_speed: 1.5,
-    k_acc: 1.0,
-    surprise_p: 0.5,
-    surprise_stress: 1.0,
 };
 
 /// The working motion's shape at time `t` [s] and frequency `hz` [Hz], for a radius of 1 m: a
@@ -342,6 +325,7 @@ enum Mode {
 #[derive(Debug)]
 pub(crate) struct SimulatedOperator {
     params: LevelParams,
+    response: OperatorResponse,
     rng: Rng,
     centres: [Vec3; 4],
     assembly_point: Vec3,
@@ -360,9 +344,14 @@ pub(crate) struct SimulatedOperator {
 }
 
 impl SimulatedOperator {
-    /// A new operator at time 0 for `level`, drawing from `seed`. The workspace must have all
-    /// four roles.
-    pub(crate) fn new(level: Level, workspace: &Workspace, seed: u64) -> crate::Result<Self> {
+    /// A new operator at time 0 for `level`, drawing from `seed`, responding to the robot as
+    /// `response` says. The workspace must have all four roles.
+    pub(crate) fn new(
+        level: Level,
+        workspace: &Workspace,
+        seed: u64,
+        response: OperatorResponse,
+    ) -> crate::Result<Self> {
         let params = LevelParams::for_level(level);
         let mut centres = [Vec3::zeros(); 4];
         for (i, role) in AreaRole::ALL.iter().enumerate() {
@@ -393,6 +382,7 @@ impl SimulatedOperator {
             burst_until: f64::NEG_INFINITY,
             last_t: None,
             params,
+            response,
             events: Vec::with_capacity(8),
         })
     }
@@ -457,9 +447,10 @@ impl SimulatedOperator {
 
     fn start_hesitation(&mut self, t: f64, stress: f64) {
         if self.hesitation_until.is_none() {
+            let k = self.response.k_duration;
             let d = self
                 .rng
-                .lognormal(self.params.hesitation_s * (1.0 + 0.5 * stress), 0.3);
+                .lognormal(self.params.hesitation_s * (1.0 + k * stress), 0.3);
             self.hesitation_until = Some(t + d);
             self.events.push(TrialEvent::Hesitation { active: true });
         }
@@ -473,19 +464,20 @@ impl SimulatedOperator {
         self.last_t = Some(t);
         let p = self.params.clone();
         let c = COMMON;
+        let r = self.response;
 
         // Hesitation: end, or start during a collaboration period with the handover pending.
         if self.hesitation_until.is_some_and(|u| t >= u) {
             self.end_hesitation();
         }
         let collaborating = robot.phase.is_collaborating();
-        let stress = c.k_speed * robot.tcp_speed_m_s / c.ref_speed_m_s
-            + c.k_acc * robot.tcp_peak_acc_m_s2 / c.ref_acc_m_s2;
+        let stress = r.k_speed * robot.tcp_speed_m_s / r.ref_speed_m_s
+            + r.k_acc * robot.tcp_peak_acc_m_s2 / r.ref_acc_m_s2;
         let presenting_now = robot.phase == Phase::Present && self.last_phase != Phase::Present;
         if presenting_now && self.mode != Mode::Done {
             let attention_elsewhere = !matches!(self.mode, Mode::NeedsPart | Mode::Reaching);
-            if attention_elsewhere && self.rng.chance(c.surprise_p) {
-                self.start_hesitation(t, stress + c.surprise_stress);
+            if attention_elsewhere && self.rng.chance(r.surprise_p) {
+                self.start_hesitation(t, stress + r.surprise_stress);
             }
         }
         self.last_phase = robot.phase;
@@ -706,7 +698,8 @@ mod tests {
     fn same_seed_same_cues_and_different_seed_differs() {
         let ws = workspace();
         let run = |seed| {
-            let mut op = SimulatedOperator::new(Level::L2, &ws, seed).unwrap();
+            let mut op =
+                SimulatedOperator::new(Level::L2, &ws, seed, OperatorResponse::default()).unwrap();
             let mut frame = CueFrame::empty(0.0);
             let mut out = Vec::new();
             for k in 0..300 {
@@ -722,7 +715,8 @@ mod tests {
     #[test]
     fn operator_needs_the_first_part_after_its_first_segment_and_reaches_for_a_presented_tcp() {
         let ws = workspace();
-        let mut op = SimulatedOperator::new(Level::L1, &ws, 1).unwrap();
+        let mut op =
+            SimulatedOperator::new(Level::L1, &ws, 1, OperatorResponse::default()).unwrap();
         let mut frame = CueFrame::empty(0.0);
         let mut robot = idle_robot();
         let mut needed_at = None;
@@ -750,6 +744,61 @@ mod tests {
         assert_eq!(op.events()[0], TrialEvent::Grasped { handover: 1 });
     }
 
+    /// The response effect sizes act (issue 14, point 4): on a fixed seed, an L2 operator who
+    /// needs a part and watches the robot approach at the collaborative cap (0.25 m/s, 0.5
+    /// m/s² peak) for 60 s hesitates (ground truth) longer the higher `k_speed`, and with every
+    /// response off (k = 0, the base rate only) less than with the shipped values. By the
+    /// model: stress 0, 2.0 and 6.5 (k_speed 0, 1.5, 6.0 with k_acc 0, 1.0, 1.0) give rates
+    /// 0.06, 0.18 and 0.45 /s and median durations 1.5, 3.0 and 6.4 s.
+    #[test]
+    fn a_higher_k_speed_gives_more_ground_truth_hesitation_on_a_fixed_seed() {
+        let ws = workspace();
+        let hesitating_s = |response: OperatorResponse| {
+            let mut op = SimulatedOperator::new(Level::L2, &ws, 5, response).unwrap();
+            let mut frame = CueFrame::empty(0.0);
+            let dt = 1.0 / 30.0;
+            let mut k = 0;
+            // Until the first part is needed (idle robot: no response).
+            while op.awaiting().is_none() {
+                op.step(k as f64 * dt, &idle_robot(), &mut frame);
+                k += 1;
+                assert!(k < 30 * 300, "needs a part within 300 s");
+            }
+            let approaching = RobotView {
+                phase: Phase::Approach,
+                tcp_m: [1.2, 1.0, 1.0],
+                tcp_speed_m_s: 0.25,
+                tcp_peak_acc_m_s2: 0.5,
+            };
+            let mut frozen = 0.0;
+            for _ in 0..(30 * 60) {
+                op.step(k as f64 * dt, &approaching, &mut frame);
+                k += 1;
+                if op.hesitating() {
+                    frozen += dt;
+                }
+            }
+            frozen
+        };
+        let shipped = OperatorResponse::default();
+        let off = hesitating_s(OperatorResponse {
+            k_speed: 0.0,
+            k_acc: 0.0,
+            ..shipped
+        });
+        let base = hesitating_s(shipped);
+        let high = hesitating_s(OperatorResponse {
+            k_speed: 6.0,
+            ..shipped
+        });
+        assert!(off < base && base < high, "{off} {base} {high} s");
+        // Clearly: a large share of the minute more.
+        assert!(
+            high - base > 10.0 && base - off > 5.0,
+            "{off} {base} {high} s"
+        );
+    }
+
     /// The fitted hand noise lets the assessment see a frozen hand (issue 14, point 1): the
     /// noise of a still simulated hand, through the assessment's own hesitation filter
     /// (`[hesitation.one_euro]`, 30 Hz), stays below v_min for a whole t_min (0.3 s, 9 frames)
@@ -762,7 +811,9 @@ mod tests {
         use assess::filter::OneEuro3;
         let h = AssessConfig::default().hesitation;
         let share_below = |sigma: f64| {
-            let mut op = SimulatedOperator::new(Level::L2, &workspace(), 3).unwrap();
+            let mut op =
+                SimulatedOperator::new(Level::L2, &workspace(), 3, OperatorResponse::default())
+                    .unwrap();
             let mut f = OneEuro3::new(h.one_euro);
             let dt = 1.0 / 30.0;
             let hand = Vec3::new(0.5, 0.3, 0.8);

@@ -761,7 +761,8 @@ fn drive<R: TrialRobot>(
         live: camera,
     } = setup;
     // The simulated operator's task parameters set the schedule, whoever the operator is.
-    let operator = SimulatedOperator::new(spec.condition, &workspace, spec.seed)?;
+    let response = cfg.operator.response;
+    let operator = SimulatedOperator::new(spec.condition, &workspace, spec.seed, response)?;
     // The operator is simulated only when no recorded or live cues replace it.
     let source: Box<dyn OperatorSource> = match (recorded, camera) {
         (Some(r), _) => Box::new(r),
@@ -770,6 +771,7 @@ fn drive<R: TrialRobot>(
             spec.condition,
             &workspace,
             spec.seed,
+            response,
         )?),
     };
     let simulated = source.simulated();
