@@ -852,7 +852,9 @@ mod tests {
         use assess::filter::OneEuro3;
         let h = AssessConfig::default().hesitation;
         let median_speed = |radius: f64| {
-            let mut op = SimulatedOperator::new(Level::L2, &workspace(), 5).unwrap();
+            let mut op =
+                SimulatedOperator::new(Level::L2, &workspace(), 5, OperatorResponse::default())
+                    .unwrap();
             let mut f = OneEuro3::new(h.one_euro);
             let dt = 1.0 / 30.0;
             let at = |k: usize, op: &mut SimulatedOperator| {
