@@ -43,7 +43,7 @@
 
 use robot_io::Joints;
 use robot_io::geometry::{
-    ARM_CAPSULES, ArmModel, BodyModel, BodyPart, Capsule, HumanBody, closest_approaches,
+    ARM_CAPSULES, Approach, ArmModel, BodyModel, BodyPart, Capsule, HumanBody, closest_approaches,
 };
 use robot_io::kinematics::flange_pose;
 use robot_io::separation::{SeparationParams, protective_distance_m};
@@ -340,12 +340,128 @@ pub struct Admissible {
 }
 
 /// Evaluates [`Admissible`] scales; holds the preallocated capsule buffers. Allocates nothing.
+///
+/// It remembers its last results (exact caches, keyed on the bits of every input a result
+/// depends on): the two latest admissible scales, the two latest joint positions' arm capsules
+/// and the latest flange speed. The lookahead asks for the same sample many times when the
+/// path has finished (every sample is its end) or twice per sample (the operator now and as
+/// predicted), and between perception frames the operator does not move.
 #[derive(Debug, Clone)]
 pub struct Envelope {
     limits: SafetyEnvelope,
     margins: PlanningMargins,
     capsules: [Capsule; ARM_CAPSULES],
     stop_capsules: [Capsule; ARM_CAPSULES],
+    fk: CapsuleCache,
+    speed: Option<([u64; 12], f64)>,
+    memo: [Option<(MemoKey, Admissible)>; 2],
+    /// The memo slot replaced next (the one not used last).
+    memo_next: usize,
+    /// Per body part: the closest approaches (now, at the stop) for the arm at the joints and
+    /// stop joints and the part's capsule of the key. The predicted body differs from the body
+    /// now only in its extrapolated points: the others reuse these.
+    parts: [Option<PartApproaches>; 4],
+}
+
+/// The closest approaches of one body part for an exact key: the joint bits now and at the
+/// stop, and the part's capsule's bits.
+type PartApproaches = ([u64; 19], Option<Approach>, Option<Approach>);
+
+fn part_key(q: &[u64; 6], q_stop: &[u64; 6], c: &Capsule) -> [u64; 19] {
+    let mut k = [0_u64; 19];
+    let values = q.iter().chain(q_stop).copied().chain(
+        c.a_m
+            .iter()
+            .chain(&c.b_m)
+            .chain(std::iter::once(&c.radius_m))
+            .map(|v| v.to_bits()),
+    );
+    for (slot, v) in k.iter_mut().zip(values) {
+        *slot = v;
+    }
+    k
+}
+
+/// `body` without `part`.
+fn without(mut body: HumanBody, part: BodyPart) -> HumanBody {
+    match part {
+        BodyPart::Head => body.head_m = None,
+        BodyPart::LeftHand => body.left_hand_m = None,
+        BodyPart::RightHand => body.right_hand_m = None,
+        BodyPart::Torso => body.torso = None,
+    }
+    body
+}
+
+/// The bits of a joint vector (an exact cache key: equal bits, equal results).
+fn joint_bits(q: &Joints) -> [u64; 6] {
+    q.map(f64::to_bits)
+}
+
+/// The arm capsules of the two latest joint positions (exact: the same bits give the same
+/// capsules).
+#[derive(Debug, Clone)]
+struct CapsuleCache {
+    slots: [Option<([u64; 6], [Capsule; ARM_CAPSULES])>; 2],
+    next: usize,
+}
+
+impl CapsuleCache {
+    /// `out` = `arm`'s capsules at `q`, from the cache when `q` was among the two latest.
+    fn capsules(&mut self, arm: &ArmModel, q: &Joints, out: &mut [Capsule; ARM_CAPSULES]) {
+        let key = joint_bits(q);
+        for (k, c) in self.slots.iter().flatten() {
+            if *k == key {
+                *out = *c;
+                return;
+            }
+        }
+        arm.capsules(q, out);
+        if let Some(slot) = self.slots.get_mut(self.next) {
+            *slot = Some((key, *out));
+        }
+        self.next = (self.next + 1) % 2;
+    }
+}
+
+/// Everything [`Envelope::admissible_scale`]'s result depends on, as bits: joints, path
+/// velocity, the body (a presence mask, then the values), the planning perception age
+/// (`max(age, margin)`) and the flags stale and collaborating.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct MemoKey([u64; 30]);
+
+impl MemoKey {
+    fn new(q: &Joints, qd: &Joints, body: &HumanBody, age: f64, stale: bool, collab: bool) -> Self {
+        let mut w = [0_u64; 30];
+        let none = [0.0; 3];
+        let torso = body.torso;
+        let points = [
+            body.head_m,
+            body.left_hand_m,
+            body.right_hand_m,
+            torso.map(|t| t.shoulder_mid_m),
+            torso.map(|t| t.normal),
+        ];
+        let mut mask = u64::from(stale) | (u64::from(collab) << 1);
+        let values = q
+            .iter()
+            .chain(qd)
+            .copied()
+            .chain(points.iter().flat_map(|p| p.unwrap_or(none)))
+            .chain(std::iter::once(age));
+        for (slot, v) in w.iter_mut().zip(values) {
+            *slot = v.to_bits();
+        }
+        for (i, p) in points.iter().enumerate() {
+            if p.is_some() {
+                mask |= 1 << (2 + i);
+            }
+        }
+        if let Some(last) = w.last_mut() {
+            *last = mask;
+        }
+        MemoKey(w)
+    }
 }
 
 /// The flange speed |J(q)·q'| [m/s] for joint velocity `qd` [rad/s] at `q` [rad], by a central
@@ -381,6 +497,14 @@ impl Envelope {
             margins,
             capsules: [zero; ARM_CAPSULES],
             stop_capsules: [zero; ARM_CAPSULES],
+            fk: CapsuleCache {
+                slots: [None; 2],
+                next: 0,
+            },
+            speed: None,
+            memo: [None; 2],
+            memo_next: 0,
+            parts: [None; 4],
         }
     }
 
@@ -427,9 +551,62 @@ impl Envelope {
         let m = self.margins.raw;
         let l = self.limits;
         let stale = perception_age_s > l.perception_reduce_after_s;
+        // The perception age grows by a frame period between frames and drops at each new one;
+        // planning with at least the margin keeps the admissible scale from following that
+        // saw-tooth (the supervisor uses the actual age, never above it in nominal operation).
+        let age = perception_age_s.max(m.perception_age_margin_s);
+        let key = MemoKey::new(q, qd_path, body, age, stale, collaborating);
+        for (i, slot) in self.memo.iter().enumerate() {
+            if let Some((k, a)) = slot
+                && *k == key
+            {
+                self.memo_next = 1 - i.min(1);
+                return *a;
+            }
+        }
+        let a = self.evaluate(q, qd_path, body, age, stale, collaborating);
+        if let Some(slot) = self.memo.get_mut(self.memo_next) {
+            *slot = Some((key, a));
+        }
+        self.memo_next = 1 - self.memo_next.min(1);
+        a
+    }
+
+    /// [`Envelope::admissible_scale`] without its memo (inputs finite; `age` the planning
+    /// age, `stale` whether the stale-perception scale applies).
+    fn evaluate(
+        &mut self,
+        q: &Joints,
+        qd_path: &Joints,
+        body: &HumanBody,
+        age: f64,
+        stale: bool,
+        collaborating: bool,
+    ) -> Admissible {
+        let invalid = Admissible {
+            scale: 0.0,
+            binding: Binding::Invalid,
+            min_distance_m: f64::NAN,
+        };
+        let m = self.margins.raw;
+        let l = self.limits;
         let k = if stale { l.stale_perception_scale } else { 1.0 };
         let w = qd_path.iter().fold(0.0_f64, |a, x| a.max(x.abs()));
-        let u = flange_speed_m_s(q, qd_path);
+        let speed_key = {
+            let mut b = [0_u64; 12];
+            for (slot, v) in b.iter_mut().zip(q.iter().chain(qd_path)) {
+                *slot = v.to_bits();
+            }
+            b
+        };
+        let u = match self.speed {
+            Some((k, u)) if k == speed_key => u,
+            _ => {
+                let u = flange_speed_m_s(q, qd_path);
+                self.speed = Some((speed_key, u));
+                u
+            }
+        };
         if !u.is_finite() {
             return invalid;
         }
@@ -465,20 +642,52 @@ impl Envelope {
         }
         // Separation: distances now and at the supervisor's stopping configuration (for the
         // current scale bound, at which the robot would run).
-        l.arm.capsules(q, &mut self.capsules);
+        self.fk.capsules(&l.arm, q, &mut self.capsules);
         let s_run = best.scale;
         let t_stop = (1.0 + m.measured_speed_allowance) * s_run * w / l.stop_deceleration_rad_s2;
         let mut q_stop = *q;
         for (qs, v) in q_stop.iter_mut().zip(qd_path) {
             *qs += s_run * v * t_stop / 2.0;
         }
-        l.arm.capsules(&q_stop, &mut self.stop_capsules);
-        let now = closest_approaches(&self.capsules, body, &l.body);
-        let stop = closest_approaches(&self.stop_capsules, body, &l.body);
-        // The perception age grows by a frame period between frames and drops at each new one;
-        // planning with at least the margin keeps the admissible scale from following that
-        // saw-tooth (the supervisor uses the actual age, never above it in nominal operation).
-        let age = perception_age_s.max(m.perception_age_margin_s);
+        self.fk.capsules(&l.arm, &q_stop, &mut self.stop_capsules);
+        // Parts whose approaches are cached for these joints are left out of the search.
+        let (q_key, stop_key) = (joint_bits(q), joint_bits(&q_stop));
+        let mut todo = *body;
+        let mut keys = [None; 4];
+        let mut cached = [None; 4];
+        for (((part, key), hit), slot) in BodyPart::ALL
+            .iter()
+            .zip(&mut keys)
+            .zip(&mut cached)
+            .zip(&self.parts)
+        {
+            let Some(c) = l.body.capsule(body, *part) else {
+                continue;
+            };
+            let k = part_key(&q_key, &stop_key, &c);
+            match slot {
+                Some((sk, a, b)) if *sk == k => {
+                    *hit = Some((*a, *b));
+                    todo = without(todo, *part);
+                }
+                _ => *key = Some(k),
+            }
+        }
+        let mut now = closest_approaches(&self.capsules, &todo, &l.body);
+        let mut stop = closest_approaches(&self.stop_capsules, &todo, &l.body);
+        for ((((a, b), key), hit), slot) in now
+            .iter_mut()
+            .zip(&mut stop)
+            .zip(&keys)
+            .zip(&cached)
+            .zip(&mut self.parts)
+        {
+            if let Some((ca, cb)) = hit {
+                (*a, *b) = (*ca, *cb);
+            } else if let Some(k) = key {
+                *slot = Some((*k, *a, *b));
+            }
+        }
         let eps = 1.0 + m.measured_speed_allowance;
         for ((part, a), b) in BodyPart::ALL.iter().zip(&now).zip(&stop) {
             let d = match (a, b) {

@@ -718,7 +718,135 @@ pub struct Approach {
 /// surface distance [m]; `None` when the part is not tracked. A tracked part with a
 /// non-finite value, or a non-finite arm capsule, gives distance NaN (callers treat NaN as a
 /// violation). Allocates nothing.
+///
+/// The result is exactly the brute-force minimum over the links in [`ArmLink::ALL`] order (the
+/// first link at the smallest distance), but a link whose distance provably exceeds the best
+/// one found so far is not computed: `|m_x − m_y| − h_x − h_y − r_x − r_y` (midpoints `m`,
+/// half-lengths `h`, radii `r`) is a lower bound of the surface distance, and a link is
+/// skipped when that bound exceeds the best by more than [`PRUNE_SLACK_M`] (far above the
+/// rounding of either computation), so a skipped link could never have been the nearest nor
+/// tied with it. The link with the smallest bound is computed first.
 pub fn closest_approaches(
+    arm: &[Capsule; ARM_CAPSULES],
+    body: &HumanBody,
+    model: &BodyModel,
+) -> [Option<Approach>; 4] {
+    if !arm.iter().all(within_pruning_range) {
+        return closest_approaches_unpruned(arm, body, model);
+    }
+    let spheres = arm.map(|c| BoundingSphere::of(&c));
+    BodyPart::ALL.map(|part| nearest_link(arm, &spheres, body, model, part))
+}
+
+/// The pruned search of [`closest_approaches`] for one part (`arm` within the pruning range,
+/// `spheres` its bounding spheres).
+fn nearest_link(
+    arm: &[Capsule; ARM_CAPSULES],
+    spheres: &[BoundingSphere; ARM_CAPSULES],
+    body: &HumanBody,
+    model: &BodyModel,
+    part: BodyPart,
+) -> Option<Approach> {
+    if !body.tracks(part) {
+        return None;
+    }
+    let Some(human) = model.capsule(body, part).filter(within_pruning_range) else {
+        return nearest_link_unpruned(arm, body, model, part);
+    };
+    let hs = BoundingSphere::of(&human);
+    // Squared midpoint distances, and the link with the smallest lower bound.
+    let mut mid2 = [0.0_f64; ARM_CAPSULES];
+    let mut first = 0;
+    let mut first_bound = f64::INFINITY;
+    for (k, (m2, s)) in mid2.iter_mut().zip(spheres).enumerate() {
+        let d = sub(&s.centre, &hs.centre);
+        *m2 = dot(&d, &d);
+        let bound = m2.sqrt() - s.reach - hs.reach;
+        if bound < first_bound {
+            first_bound = bound;
+            first = k;
+        }
+    }
+    let (Some(c0), Some(l0)) = (arm.get(first), ArmLink::ALL.get(first)) else {
+        return nearest_link_unpruned(arm, body, model, part);
+    };
+    let d0 = capsule_distance(c0, &human);
+    if d0.is_nan() {
+        return nearest_link_unpruned(arm, body, model, part);
+    }
+    let mut best = Approach {
+        distance_m: d0,
+        link: *l0,
+        part,
+    };
+    let mut best_k = first;
+    for (k, ((link, capsule), (s, m2))) in ArmLink::ALL
+        .iter()
+        .zip(arm)
+        .zip(spheres.iter().zip(&mid2))
+        .enumerate()
+    {
+        if k == first {
+            continue;
+        }
+        // Skip when |m_x − m_y| ≥ best + reach_x + reach_y + slack (squared; both sides ≥ 0).
+        let t = best.distance_m + s.reach + hs.reach + PRUNE_SLACK_M;
+        if *m2 >= t * t {
+            continue;
+        }
+        let d = capsule_distance(capsule, &human);
+        if d.is_nan() {
+            return nearest_link_unpruned(arm, body, model, part);
+        }
+        if d < best.distance_m || (d == best.distance_m && k < best_k) {
+            best = Approach {
+                distance_m: d,
+                link: *link,
+                part,
+            };
+            best_k = k;
+        }
+    }
+    Some(best)
+}
+
+/// Margin [m] by which a link's lower bound must exceed the best distance for
+/// [`closest_approaches`] to skip it (the rounding of the bound and of the distance is
+/// ~1e-15 m at the arm's scale).
+pub const PRUNE_SLACK_M: f64 = 1e-9;
+
+/// Coordinates and radii up to this size [m] are pruned; larger (absurd) ones, where the
+/// products of the distance computation could overflow, take the brute-force path.
+const PRUNE_RANGE_M: f64 = 1e6;
+
+/// Whether `c` is finite and within [`PRUNE_RANGE_M`].
+fn within_pruning_range(c: &Capsule) -> bool {
+    c.a_m
+        .iter()
+        .chain(&c.b_m)
+        .chain(std::iter::once(&c.radius_m))
+        .all(|v| v.abs() <= PRUNE_RANGE_M)
+}
+
+/// A capsule's bounding sphere: the segment's midpoint and half-length plus the radius [m].
+#[derive(Clone, Copy)]
+struct BoundingSphere {
+    centre: Point3,
+    reach: f64,
+}
+
+impl BoundingSphere {
+    fn of(c: &Capsule) -> BoundingSphere {
+        let centre = scale(&add(&c.a_m, &c.b_m), 0.5);
+        BoundingSphere {
+            centre,
+            reach: 0.5 * norm(&sub(&c.b_m, &c.a_m)) + c.radius_m,
+        }
+    }
+}
+
+/// [`closest_approaches`] by brute force (every link), for non-finite input.
+fn closest_approaches_unpruned(
     arm: &[Capsule; ARM_CAPSULES],
     body: &HumanBody,
     model: &BodyModel,
@@ -727,30 +855,40 @@ pub fn closest_approaches(
         if !body.tracks(part) {
             return None;
         }
-        let nan = |link| {
-            Some(Approach {
-                distance_m: f64::NAN,
-                link,
-                part,
-            })
-        };
-        let Some(human) = model.capsule(body, part) else {
-            return nan(ArmLink::Shoulder);
-        };
-        let mut best: Option<Approach> = None;
-        for (link, capsule) in ArmLink::ALL.iter().zip(arm) {
-            let d = capsule_distance(capsule, &human);
-            if d.is_nan() {
-                return nan(*link);
-            }
-            if best.is_none_or(|b| d < b.distance_m) {
-                best = Some(Approach {
-                    distance_m: d,
-                    link: *link,
-                    part,
-                });
-            }
-        }
-        best
+        nearest_link_unpruned(arm, body, model, part)
     })
+}
+
+/// The nearest link to a tracked `part` by brute force (NaN as [`closest_approaches`] says).
+fn nearest_link_unpruned(
+    arm: &[Capsule; ARM_CAPSULES],
+    body: &HumanBody,
+    model: &BodyModel,
+    part: BodyPart,
+) -> Option<Approach> {
+    let nan = |link| {
+        Some(Approach {
+            distance_m: f64::NAN,
+            link,
+            part,
+        })
+    };
+    let Some(human) = model.capsule(body, part) else {
+        return nan(ArmLink::Shoulder);
+    };
+    let mut best: Option<Approach> = None;
+    for (link, capsule) in ArmLink::ALL.iter().zip(arm) {
+        let d = capsule_distance(capsule, &human);
+        if d.is_nan() {
+            return nan(*link);
+        }
+        if best.is_none_or(|b| d < b.distance_m) {
+            best = Some(Approach {
+                distance_m: d,
+                link: *link,
+                part,
+            });
+        }
+    }
+    best
 }

@@ -51,6 +51,13 @@ pub const FRAME_COUNT: usize = 7;
 /// A 3×3 rotation matrix, row-major [-] (the plain-array form the simulator uses).
 pub type Mat3 = [[f64; 3]; 3];
 
+/// Each link's constant twist `from_axis_angle(x, alpha_i)` (computed once, so it is the same
+/// value the expression gives).
+static LINK_TWISTS: std::sync::LazyLock<[UnitQuaternion<f64>; 6]> =
+    std::sync::LazyLock::new(|| {
+        UR5E_DH_ALPHA.map(|alpha| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), alpha))
+    });
+
 /// The DH transform of link `i` (0-based) at joint angle `theta` [rad]; identity for `i > 5`.
 pub fn dh_link(i: usize, theta: f64) -> Isometry3<f64> {
     let (Some(&d), Some(&a), Some(&alpha)) =
@@ -59,8 +66,12 @@ pub fn dh_link(i: usize, theta: f64) -> Isometry3<f64> {
         return Isometry3::identity();
     };
     let (st, ct) = theta.sin_cos();
-    let rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), theta)
-        * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), alpha);
+    // The twist about x is constant per link: computed once, by the same expression.
+    let twist = LINK_TWISTS
+        .get(i)
+        .copied()
+        .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), alpha));
+    let rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), theta) * twist;
     Isometry3::from_parts(Translation3::new(a * ct, a * st, d), rotation)
 }
 

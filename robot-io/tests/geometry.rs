@@ -741,6 +741,13 @@ proptest! {
                     let brute = c.iter().map(|x| capsule_distance(x, &h)).fold(f64::INFINITY, f64::min);
                     prop_assert_eq!(ap.distance_m, brute);
                     prop_assert_eq!(capsule_distance(&c[ap.link.index()], &h), brute);
+                    // The pruned search names the same link as the brute force: the first one
+                    // (in ArmLink::ALL order) at the smallest distance.
+                    let first = c
+                        .iter()
+                        .position(|x| capsule_distance(x, &h) == brute)
+                        .map(|k| ArmLink::ALL[k]);
+                    prop_assert_eq!(Some(ap.link), first);
                 }
                 (h, ap) => prop_assert!(false, "{:?} vs {:?}", h, ap),
             }
