@@ -33,6 +33,7 @@ use std::path::PathBuf;
 use assess::vision::RgbImage;
 use serde_json::Value;
 
+#[allow(dead_code)] // the per-frame selections are vision_scenes.rs'
 #[path = "support/compare.rs"]
 mod compare;
 #[path = "support/moving.rs"]
@@ -64,6 +65,7 @@ fn tracking_on_moving_video_against_mediapipe_video_mode() {
         let lm = p.process_at(k as f64 / moving::FPS, &frame, None).unwrap();
         let shifted = moving::frame_shifted(&photo, k, SHIFT_PX);
         shift.add(
+            k,
             &lm,
             &q.process_at(k as f64 / moving::FPS, &shifted, None)
                 .unwrap(),

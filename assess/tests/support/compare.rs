@@ -67,6 +67,16 @@ impl Stats {
             n: s.len(),
         }
     }
+
+    /// The statistics of the values of `v` = (frame, value) on the frames `keep` accepts.
+    pub(crate) fn at(v: &[(usize, f64)], keep: impl Fn(usize) -> bool) -> Stats {
+        let kept: Vec<f64> = v
+            .iter()
+            .filter(|(k, _)| keep(*k))
+            .map(|(_, e)| *e)
+            .collect();
+        Stats::of(&kept)
+    }
 }
 
 /// The sub-pixel pan by which the tests measure the models' own sensitivity [px]: every frame
@@ -81,14 +91,15 @@ pub(crate) const SHIFT_PX: f64 = 0.3;
 /// crop-centre difference issue 13 measured between ours and mediapipe's (0.3 px).
 #[derive(Default)]
 pub(crate) struct SelfShift {
-    pose: Vec<f64>,
-    core: Vec<f64>,
-    hands: Vec<f64>,
+    /// (frame, value) per series.
+    pose: Vec<(usize, f64)>,
+    core: Vec<(usize, f64)>,
+    hands: Vec<(usize, f64)>,
 }
 
 impl SelfShift {
-    /// Adds one frame: `ours` on the frame, `shifted` on the panned one.
-    pub(crate) fn add(&mut self, ours: &Landmarks, shifted: &Landmarks) {
+    /// Adds frame `k`: `ours` on the frame, `shifted` on the panned one.
+    pub(crate) fn add(&mut self, k: usize, ours: &Landmarks, shifted: &Landmarks) {
         let back = |l: &Landmark| [l.x + SHIFT_PX, l.y];
         let worst_of = |a: &[Landmark], b: &[Landmark], idx: &mut dyn Iterator<Item = usize>| {
             idx.map(|i| d(back(&a[i]), px(&b[i]))).fold(0.0, f64::max)
@@ -96,10 +107,11 @@ impl SelfShift {
         if let (Some(a), Some(b)) = (&ours.pose, &shifted.pose) {
             let shoulders = d(px(&a.points[11]), px(&a.points[12]));
             self.pose
-                .push(worst_of(&a.points, &b.points, &mut (0..33)) / shoulders);
-            self.core.push(
+                .push((k, worst_of(&a.points, &b.points, &mut (0..33)) / shoulders));
+            self.core.push((
+                k,
                 worst_of(&a.points, &b.points, &mut [0, 11, 12, 23, 24].into_iter()) / shoulders,
-            );
+            ));
         }
         for a in &ours.hands {
             let wrist = back(&a.points[0]);
@@ -107,17 +119,19 @@ impl SelfShift {
             let nearest = nearest_hand(&shifted.hands, wrist);
             if let Some(b) = nearest.filter(|b| d(px(&b.points[0]), wrist) < length) {
                 self.hands
-                    .push(worst_of(&a.points, &b.points, &mut (0..21)) / length);
+                    .push((k, worst_of(&a.points, &b.points, &mut (0..21)) / length));
             }
         }
     }
 
     /// The pose worst, nose/shoulders/hips and hands series' statistics.
     pub(crate) fn stats(&self) -> (Stats, Stats, Stats) {
-        (
-            Stats::of(&self.pose),
-            Stats::of(&self.core),
-            Stats::of(&self.hands),
-        )
+        self.stats_where(|_| true)
+    }
+
+    /// As [`SelfShift::stats`], over the frames `keep` accepts.
+    pub(crate) fn stats_where(&self, keep: impl Fn(usize) -> bool) -> (Stats, Stats, Stats) {
+        let of = |v: &[(usize, f64)]| Stats::at(v, &keep);
+        (of(&self.pose), of(&self.core), of(&self.hands))
     }
 }
